@@ -1,0 +1,107 @@
+"""The reuse rule: who learns from whose experience (Fig. 2, Eq. 9, Algorithm 1 lines 5-6).
+
+``M[i, j]`` is the probability that learner ``i`` trains on agent ``j``'s experience.
+MAPPO reuses everything uniformly, HAPPO only its own, OAPO gates by policy distance.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _check_n(n: int) -> int:
+    if int(n) != n or n < 1:
+        raise ValueError(f"number of agents must be a positive integer, got {n!r}")
+    return int(n)
+
+
+def mappo_matrix(n: int) -> np.ndarray:
+    """Fig. 2a: parameter sharing, every learner sees every agent's experience, M = 1/n."""
+    n = _check_n(n)
+    return np.full((n, n), 1.0 / n)
+
+
+def happo_matrix(n: int) -> np.ndarray:
+    """Fig. 2b: no sharing, every learner sees only its own experience, M = I."""
+    return np.eye(_check_n(n))
+
+
+def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | None = None) -> np.ndarray:
+    """Eq. 9: the reuse distribution of every learner, one row each.
+
+    ``kl[i, j]`` is D_KL^max(pi_j, pi_i), the distance from source j to learner i. Learner
+    i keeps ``lam`` for itself and spreads ``1 - lam`` evenly over the other sources with
+    ``kl[i, j] <= sigma`` that ``allowed`` (a fixed boolean mask) permits; if it has no such
+    source, it keeps everything (M[i, i] = 1). Rows sum to 1.
+    """
+    kl = np.asarray(kl, dtype=float)
+    if kl.ndim != 2 or kl.shape[0] != kl.shape[1]:
+        raise ValueError(f"kl must be a square (n, n) matrix, got shape {kl.shape}")
+    if np.isnan(kl).any() or (kl < 0).any():
+        raise ValueError("kl must hold non-negative numbers (KL divergences)")
+    if not sigma >= 0:
+        raise ValueError(f"sigma must be >= 0 (a KL threshold), got {sigma!r}")
+    if not 0.0 <= lam <= 1.0:
+        raise ValueError(f"lambda must lie in [0, 1], got {lam!r}")
+    n = kl.shape[0]
+    ok = kl <= sigma
+    if allowed is not None:
+        allowed = np.asarray(allowed, dtype=bool)
+        if allowed.shape != kl.shape:
+            raise ValueError(f"allowed mask has shape {allowed.shape}, expected {kl.shape}")
+        ok &= allowed
+    np.fill_diagonal(ok, False)
+    others = ok.sum(1, keepdims=True)  # gamma_i - 1 in the paper's notation
+    m = np.where(ok, (1.0 - lam) / np.maximum(others, 1), 0.0)
+    m[np.arange(n), np.arange(n)] = np.where(others[:, 0] > 0, lam, 1.0)
+    return m
+
+
+def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
+    """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations.
+
+    ``probs[i, j]`` is (batch, actions): learner i's action distribution on agent j's
+    observations, so ``probs[j, j]`` is the source's own policy there. Returns K with
+    K[i, j] = reduce_over_batch KL(pi_j(.|o_j) || pi_i(.|o_j)), reduce in {"max", "mean"}.
+    """
+    probs = np.asarray(probs, dtype=float)
+    if probs.ndim != 4 or probs.shape[0] != probs.shape[1]:
+        raise ValueError(f"probs must have shape (n, n, batch, actions), got {probs.shape}")
+    if reduce not in ("max", "mean"):
+        raise ValueError(f"KL estimator must be 'max' or 'mean', got {reduce!r}")
+    n = probs.shape[0]
+    own = probs[np.arange(n), np.arange(n)]  # (n_sources, batch, actions)
+    logp = np.log(np.clip(probs, eps, None))
+    kl = (own[None] * (np.log(np.clip(own, eps, None))[None] - logp)).sum(-1)  # (i, j, batch)
+    kl = np.maximum(kl, 0.0)
+    return kl.max(-1) if reduce == "max" else kl.mean(-1)
+
+
+def sample_mapping(m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Algorithm 1 line 5: draw e, one source per learner, e[i] ~ M[i, :]."""
+    m = np.asarray(m, dtype=float)
+    u = rng.random(m.shape[0])
+    e = (np.cumsum(m, 1) < u[:, None]).sum(1)
+    return np.minimum(e, m.shape[1] - 1)
+
+
+def update_order(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Algorithm 1 line 6: a random order in which the learners are updated."""
+    return rng.permutation(_check_n(n))
+
+
+def scheme_mask(scheme: str, agents: tuple[str, ...]) -> np.ndarray:
+    """Allowed-pair masks of Fig. 5b on Black-Blue-Red, by agent type.
+
+    NR: no reuse; UR: red and black share (unreasonable); RR: black and blue share
+    (reasonable); AR: everyone shares. The diagonal is always allowed.
+    """
+    pairs = {"NR": set(), "UR": {("red", "black")}, "RR": {("black", "blue")}}
+    if scheme == "AR":
+        return np.ones((len(agents), len(agents)), dtype=bool)
+    if scheme not in pairs:
+        raise ValueError(f"unknown reuse scheme {scheme!r}; choose from ['AR', 'NR', 'RR', 'UR']")
+    mask = np.eye(len(agents), dtype=bool)
+    for i, a in enumerate(agents):
+        for j, b in enumerate(agents):
+            mask[i, j] |= (a, b) in pairs[scheme] or (b, a) in pairs[scheme]
+    return mask

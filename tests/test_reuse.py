@@ -1,0 +1,123 @@
+"""The reuse rule (Eq. 9, Fig. 2, Algorithm 1 lines 5-6) against its defining properties."""
+import itertools
+
+import numpy as np
+import pytest
+
+from oapo_lite import reuse
+
+
+def random_kl(n, seed):
+    rng = np.random.default_rng(seed)
+    kl = rng.exponential(0.2, size=(n, n))
+    np.fill_diagonal(kl, 0.0)
+    return kl
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7])
+@pytest.mark.parametrize("sigma", [0.0, 0.05, 0.2, np.inf])
+@pytest.mark.parametrize("lam", [0.0, 0.3, 0.7, 1.0])
+def test_oapo_rows_are_distributions(n, sigma, lam):
+    m = reuse.oapo_matrix(random_kl(n, n), sigma, lam)
+    assert np.allclose(m.sum(1), 1.0)
+    assert (m >= 0).all()
+
+
+def test_eq9_entries_by_hand():
+    # Learner 0 may use 1 and 2 (kl <= 0.1), not 3; learner 3 may use nobody.
+    kl = np.array(
+        [[0.0, 0.05, 0.1, 0.5], [0.05, 0.0, 0.3, 0.3], [0.1, 0.3, 0.0, 0.9], [0.5, 0.3, 0.9, 0.0]]
+    )
+    m = reuse.oapo_matrix(kl, sigma=0.1, lam=0.7)
+    expected = np.array(
+        [[0.7, 0.15, 0.15, 0.0], [0.3, 0.7, 0.0, 0.0], [0.3, 0.0, 0.7, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    )
+    assert np.allclose(m, expected)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_zeros_exactly_where_gated(seed):
+    kl = random_kl(5, seed)
+    allowed = np.random.default_rng(seed + 100).random((5, 5)) < 0.6
+    m = reuse.oapo_matrix(kl, sigma=0.2, lam=0.6, allowed=allowed)
+    off = ~np.eye(5, dtype=bool)
+    assert (m[off & ((kl > 0.2) | ~allowed)] == 0).all()
+    assert (m[off & (kl <= 0.2) & allowed] > 0).all()
+    has_peer = ((kl <= 0.2) & allowed & off).any(1)
+    assert np.allclose(np.diag(m), np.where(has_peer, 0.6, 1.0))
+
+
+def test_sigma_zero_gives_identity_and_lone_agent_keeps_all():
+    kl = random_kl(4, 0) + 1e-3 * ~np.eye(4, dtype=bool)
+    assert np.array_equal(reuse.oapo_matrix(kl, 0.0, 0.4), np.eye(4))
+    assert np.array_equal(reuse.oapo_matrix(np.zeros((1, 1)), 0.5, 0.2), np.ones((1, 1)))
+
+
+def test_infinite_sigma_and_lambda_one_over_n_is_mappo():
+    n = 4
+    m = reuse.oapo_matrix(random_kl(n, 3), np.inf, 1.0 / n)
+    assert np.allclose(m, reuse.mappo_matrix(n))
+    assert np.array_equal(reuse.happo_matrix(n), np.eye(n))
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(sigma=-0.1, lam=0.5), "sigma"),
+        (dict(sigma=float("nan"), lam=0.5), "sigma"),
+        (dict(sigma=0.1, lam=1.5), "lambda"),
+        (dict(sigma=0.1, lam=-0.01), "lambda"),
+        (dict(sigma=0.1, lam=0.5, allowed=np.ones((2, 2), bool)), "allowed"),
+    ],
+)
+def test_bad_arguments_raise(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        reuse.oapo_matrix(np.zeros((3, 3)), **kwargs)
+
+
+def test_bad_kl_shape_raises():
+    with pytest.raises(ValueError, match="square"):
+        reuse.oapo_matrix(np.zeros((2, 3)), 0.1, 0.5)
+    with pytest.raises(ValueError, match="non-negative"):
+        reuse.oapo_matrix(-np.ones((2, 2)), 0.1, 0.5)
+
+
+def test_kl_matrix_against_direct_sum():
+    rng = np.random.default_rng(1)
+    probs = rng.dirichlet(np.ones(5), size=(3, 3, 8))
+    k_max = reuse.kl_matrix(probs, "max")
+    k_mean = reuse.kl_matrix(probs, "mean")
+    for i, j in itertools.product(range(3), repeat=2):
+        kls = [sum(p * np.log(p / q) for p, q in zip(probs[j, j, b], probs[i, j, b])) for b in range(8)]
+        assert np.isclose(k_max[i, j], max(kls))
+        assert np.isclose(k_mean[i, j], np.mean(kls))
+    assert np.allclose(np.diag(k_max), 0.0)
+    with pytest.raises(ValueError, match="'max' or 'mean'"):
+        reuse.kl_matrix(probs, "median")
+
+
+def test_sample_mapping_frequencies_match_m():
+    m = reuse.oapo_matrix(random_kl(4, 2), 0.3, 0.4)
+    rng = np.random.default_rng(0)
+    draws = np.array([reuse.sample_mapping(m, rng) for _ in range(20000)])
+    freq = np.stack([(draws == j).mean(0) for j in range(4)], 1)
+    assert np.abs(freq - m).max() < 0.02
+    assert (m[np.arange(4)[None], draws] > 0).all()  # never draws a forbidden source
+
+
+def test_update_order_is_a_permutation_and_seeded():
+    a = reuse.update_order(6, np.random.default_rng(5))
+    b = reuse.update_order(6, np.random.default_rng(5))
+    assert sorted(a) == list(range(6)) and np.array_equal(a, b)
+    with pytest.raises(ValueError, match="positive integer"):
+        reuse.update_order(0, np.random.default_rng(0))
+
+
+def test_scheme_masks():
+    agents = ("red", "black", "blue")
+    assert np.array_equal(reuse.scheme_mask("NR", agents), np.eye(3, dtype=bool))
+    assert reuse.scheme_mask("UR", agents)[0, 1] and not reuse.scheme_mask("UR", agents)[1, 2]
+    assert reuse.scheme_mask("RR", agents)[1, 2] and not reuse.scheme_mask("RR", agents)[0, 1]
+    assert reuse.scheme_mask("AR", agents).all()
+    with pytest.raises(ValueError, match="unknown reuse scheme 'XX'"):
+        reuse.scheme_mask("XX", agents)
