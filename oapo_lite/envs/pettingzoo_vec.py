@@ -1,0 +1,158 @@
+"""Any PettingZoo ``ParallelEnv`` behind the ``VecStep`` interface of the maze core.
+
+The generic path: ``n_envs`` copies stepped one after another (environments we do not own
+cannot be vectorised for them). Agents come in ``possible_agents`` order; the team reward
+of a step is the mean of the agents' rewards; observations of agents whose spaces are
+smaller are zero-padded, and so are discrete action sets (padded actions are unavailable).
+"""
+from __future__ import annotations
+
+import copy
+from typing import Callable
+
+import numpy as np
+from gymnasium import spaces
+
+from .core import VecStep
+
+
+def _flat_obs(obs, dim: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """(padded flat observation, action mask or None) of one agent's raw observation."""
+    mask = None
+    if isinstance(obs, dict) and "observation" in obs:
+        mask = obs.get("action_mask")
+        obs = obs["observation"]
+    flat = np.asarray(obs, dtype=np.float32).ravel()
+    return np.pad(flat, (0, dim - flat.size)), mask
+
+
+def _obs_size(space: spaces.Space) -> int:
+    if isinstance(space, spaces.Dict) and "observation" in space.spaces:
+        space = space["observation"]
+    return int(np.prod(space.shape))
+
+
+class PettingZooVec:
+    """``n_envs`` copies of ``env_fn()`` with auto-reset, presenting ``VecMaze``'s interface.
+
+    Copy k is first reset with ``seed + k``. The global state is ``env.state()`` when the
+    environment implements it, otherwise the concatenated observations. Action masks come
+    from an ``action_mask`` key of a dict observation or of the info dict; Box action spaces
+    give continuous actions (``continuous = True``), clipped to their bounds when stepping.
+    ``max_steps`` (optional) truncates episodes that the environment itself lets run on.
+    ``episode_success`` is read from an ``episode_success`` info entry (NaN without one).
+    """
+
+    def __init__(self, env_fn: Callable[[], object], n_envs: int, seed: int = 0, max_steps: int | None = None):
+        if int(n_envs) != n_envs or n_envs < 1:
+            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
+        self.envs = [env_fn() for _ in range(int(n_envs))]
+        self.n_envs, self.seed, self.max_steps = int(n_envs), int(seed), max_steps
+        first = self.envs[0]
+        self.agents = tuple(first.possible_agents)
+        self.n_agents = len(self.agents)
+        self.spaces = tuple((first.observation_space(a), first.action_space(a)) for a in self.agents)
+        acts = [act for _, act in self.spaces]
+        kinds = {type(a) for a in acts}
+        if kinds == {spaces.Discrete}:
+            self.continuous = False
+            self.n_actions = max(int(a.n) for a in acts)
+        elif kinds == {spaces.Box} and len({a.shape for a in acts}) == 1:
+            self.continuous = True
+            self.n_actions = int(np.prod(acts[0].shape))
+        else:
+            raise ValueError(
+                "PettingZooVec needs all-Discrete action spaces, or Box spaces of one shape; got "
+                + ", ".join(f"{a}: {s}" for a, s in zip(self.agents, acts))
+            )
+        self.obs_dim = max(_obs_size(o) for o, _ in self.spaces)
+        self._has_state = self._try_state(first) is not None
+        self.state_dim = (int(np.prod(first.state_space.shape)) if self._has_state
+                          else sum(_obs_size(o) for o, _ in self.spaces))
+        self._t = np.zeros(self.n_envs, dtype=np.int64)
+        self._returns = np.zeros(self.n_envs, dtype=np.float64)
+        self._seeded = False
+
+    @staticmethod
+    def _try_state(env) -> np.ndarray | None:
+        try:
+            return np.asarray(env.state(), dtype=np.float32).ravel()
+        except (NotImplementedError, AttributeError):
+            return None
+
+    def _view(self, env, obs: dict, infos: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(obs (n, obs_dim), avail (n, A), state) of one copy; absent agents read as zeros."""
+        o = np.zeros((self.n_agents, self.obs_dim), dtype=np.float32)
+        avail = np.ones((self.n_agents, self.n_actions), dtype=bool)
+        for k, agent in enumerate(self.agents):
+            if not self.continuous:
+                avail[k, self.spaces[k][1].n:] = False
+            if agent not in obs:
+                continue
+            o[k], mask = _flat_obs(obs[agent], self.obs_dim)
+            mask = mask if mask is not None else infos.get(agent, {}).get("action_mask")
+            if mask is not None and not self.continuous:
+                avail[k, : len(mask)] = np.asarray(mask, dtype=bool)
+        raw = [_flat_obs(obs[a], _obs_size(s))[0] if a in obs else np.zeros(_obs_size(s), np.float32)
+               for a, (s, _) in zip(self.agents, self.spaces)]
+        state = self._try_state(env) if self._has_state else np.concatenate(raw)
+        return o, avail, state
+
+    def _reset_copy(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        obs, infos = self.envs[k].reset(seed=None if self._seeded else self.seed + k)
+        self._t[k], self._returns[k] = 0, 0.0
+        return self._view(self.envs[k], obs, infos)
+
+    def reset(self) -> VecStep:
+        views = [self._reset_copy(k) for k in range(self.n_envs)]
+        self._seeded = True
+        obs, avail, state = (np.stack(v) for v in zip(*views))
+        no = np.zeros(self.n_envs, dtype=bool)
+        nan = np.full(self.n_envs, np.nan, dtype=np.float32)
+        return VecStep(obs, state, avail, np.zeros(self.n_envs, np.float32), no, no.copy(), obs.copy(),
+                       state.copy(), nan, nan.copy())
+
+    def _env_action(self, k: int, a):
+        space = self.spaces[k][1]
+        return np.clip(a, space.low, space.high).astype(space.dtype) if self.continuous else int(a)
+
+    def step(self, actions) -> VecStep:
+        """``actions`` (N, n) ints, or (N, n, D) floats for Box spaces."""
+        N = self.n_envs
+        out = {key: [] for key in ("obs", "avail", "state", "final_obs", "final_state")}
+        reward = np.zeros(N, np.float32)
+        terminated, truncated = np.zeros(N, bool), np.zeros(N, bool)
+        ep_return, ep_success = np.full(N, np.nan, np.float32), np.full(N, np.nan, np.float32)
+        for e, env in enumerate(self.envs):
+            live = list(env.agents)
+            obs, rew, term, trunc, infos = env.step(
+                {a: self._env_action(k, actions[e][k]) for k, a in enumerate(self.agents) if a in live})
+            reward[e] = np.mean([rew[a] for a in live]) if live else 0.0
+            self._t[e] += 1
+            self._returns[e] += reward[e]
+            terminated[e] = bool(live) and all(term.get(a, False) for a in live)
+            truncated[e] = not terminated[e] and (
+                not env.agents or all(term.get(a, False) or trunc.get(a, False) for a in live)
+                or (self.max_steps is not None and self._t[e] >= self.max_steps))
+            final = self._view(env, obs, infos)
+            if terminated[e] or truncated[e]:
+                ep_return[e] = self._returns[e]
+                ep_success[e] = next((i["episode_success"] for i in infos.values() if "episode_success" in i), np.nan)
+                now = self._reset_copy(e)
+            else:
+                now = final
+            for key, value in zip(("obs", "avail", "state"), now):
+                out[key].append(value)
+            out["final_obs"].append(final[0])
+            out["final_state"].append(final[2])
+        o = {key: np.stack(v) for key, v in out.items()}
+        return VecStep(o["obs"], o["state"], o["avail"], reward, terminated, truncated, o["final_obs"],
+                       o["final_state"], ep_return, ep_success)
+
+    def get_state(self) -> dict:
+        """Deep copies of the environment copies and the episode counters (for checkpoints)."""
+        return copy.deepcopy({"envs": self.envs, "t": self._t, "returns": self._returns, "seeded": self._seeded})
+
+    def set_state(self, d: dict) -> None:
+        d = copy.deepcopy(d)
+        self.envs, self._t, self._returns, self._seeded = d["envs"], d["t"], d["returns"], d["seeded"]
