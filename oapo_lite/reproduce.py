@@ -40,7 +40,7 @@ def run_notebooks(budget: str, inplace: bool) -> list[tuple[str, float]]:
         params = {"budget": budget} if takes_budget(path) else {}
         start = time.perf_counter()
         pm.execute_notebook(
-            str(path), str(out_dir / path.name), parameters=params, kernel_name="python3",
+            str(path), str(out_dir / path.name), parameters=params, kernel_name="python3", language="python",
             cwd=str(NOTEBOOKS), progress_bar=False,
         )
         timings.append((path.name, time.perf_counter() - start))

@@ -69,7 +69,9 @@ class Verdict:
 
 
 def _stderr(s: pd.DataFrame, label, col: str) -> float:
-    return float(s.loc[label, f"{col}_std"]) / np.sqrt(max(int(s.loc[label, "seeds"]), 1))
+    """Standard error over seeds; with one seed the noise is unknown, so nothing beats it."""
+    seeds = int(s.loc[label, "seeds"])
+    return float(s.loc[label, f"{col}_std"]) / np.sqrt(seeds) if seeds > 1 else np.inf
 
 
 def _status(diff: float, noise: float) -> str:

@@ -69,3 +69,9 @@ def test_figure_claims_follow_the_data():
     assert not held["OATRPO converges faster than OAPPO"]
     sentence = v.claims_fig3b(bad)[0].sentence()
     assert "not reproduced" in sentence and "mappo 1.000" in sentence
+
+
+def test_one_seed_is_never_more_than_direction():
+    df = curves({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
+    verdict = v.faster(v.summary(df), "fast", "slow", "x")
+    assert verdict.status == v.DIRECTION

@@ -1,0 +1,153 @@
+"""Experiments of Section 6.1: budgets, the runs behind each figure, and a run cache.
+
+A figure is a list of (label, TrainConfig). Every run's evaluation rows are written to
+``<data>/runs/<run id>.csv`` atomically once the run has finished, so a reproduction that
+is interrupted resumes by skipping what is on disk; a figure's CSV is the concatenation of
+its runs, with a ``label`` column naming the curve each row belongs to.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from oapo_lite.train import TrainConfig, train
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How much to spend on each curve of each figure."""
+
+    seeds: tuple[int, ...]
+    steps: int  # env steps per run
+    eval_every: int  # iterations between evaluations
+    eval_episodes: int
+
+
+BUDGETS = {
+    "smoke": Budget(seeds=(0,), steps=3_200, eval_every=1, eval_episodes=8),
+    "paper": Budget(seeds=(0, 1, 2, 3, 4), steps=240_000, eval_every=5, eval_episodes=32),
+}
+
+
+def get_budget(name: str) -> Budget:
+    if name not in BUDGETS:
+        raise ValueError(f"unknown budget {name!r}; choose from {sorted(BUDGETS)}")
+    return BUDGETS[name]
+
+
+def figures_dir(budget: str) -> Path:
+    """The paper budget's figures are the committed ones; others go to a side folder."""
+    return ROOT / "figures" if budget == "paper" else ROOT / "figures" / budget
+
+
+def data_dir(budget: str) -> Path:
+    return figures_dir(budget) / "data"
+
+
+# Section 6.1's figures: which curves, with which settings.
+SIGMAS = (0.01, 0.1, 1.0, 10.0)
+LAMBDAS = (0.2, 0.4, 0.7, 1.0)
+SCHEMES = ("NR", "UR", "RR", "AR")
+SCHEME_LAM = 0.5  # a sharing pair weighs own and peer experience equally
+
+
+def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
+    b = get_budget(budget)
+
+    def cfg(**kw) -> TrainConfig:
+        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+
+    grids = {
+        "fig3b": [(a, dict(algo=a, env="black_red")) for a in ("oappo", "oatrpo", "mappo", "happo")],
+        "fig3c": [(s, dict(algo="oappo", env="black_red", sigma=s)) for s in SIGMAS],
+        "fig3d": [(lam, dict(algo="oappo", env="black_red", lam=lam)) for lam in LAMBDAS],
+        # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that
+        # the mask alone decides, as in the paper's "modified OAPPO parameters".
+        "fig5b": [(s, dict(algo="oappo", env="black_blue_red", allowed=s, sigma=float("inf"),
+                           lam=SCHEME_LAM)) for s in SCHEMES],
+        "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
+    }
+    if figure not in grids:
+        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids)}")
+    seeds = b.seeds[:1] if figure == "fig1" else b.seeds
+    return [(label, cfg(seed=s, **kw)) for label, kw in grids[figure] for s in seeds]
+
+
+FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")
+
+
+def run_id(cfg: TrainConfig) -> str:
+    blob = json.dumps(cfg.flat(), sort_keys=True, default=str)
+    return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+
+
+def run_path(cfg: TrainConfig, budget: str) -> Path:
+    return data_dir(budget) / "runs" / f"{run_id(cfg)}.csv"
+
+
+def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
+    """Write next to the target, then rename: a reader sees the old file or the whole new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".tmp{os.getpid()}")
+    df.to_csv(tmp, index=False)
+    os.replace(tmp, path)
+
+
+def _run_one(cfg: TrainConfig, budget: str) -> str:
+    path = run_path(cfg, budget)
+    rows = train(cfg, path.parent.parent / "checkpoints" / run_id(cfg), progress=False)
+    write_csv_atomic(rows, path)
+    return run_id(cfg)
+
+
+@dataclass
+class RunCount:
+    done: int
+    cached: int
+
+
+def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = True) -> RunCount:
+    """Train every run of the given figures that is not on disk yet, ``workers`` at a time."""
+    from tqdm import tqdm
+
+    todo, seen = [], set()
+    for fig in figures:
+        for _, cfg in figure_runs(fig, budget):
+            if run_id(cfg) not in seen:
+                seen.add(run_id(cfg))
+                todo.append(cfg)
+    missing = [c for c in todo if not run_path(c, budget).exists()]
+    with tqdm(total=len(missing), desc=f"runs ({budget})", disable=not progress) as bar:
+        if workers <= 1:
+            for c in missing:
+                bar.set_postfix_str(run_id(c))
+                _run_one(c, budget)
+                bar.update()
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                futures = [pool.submit(_run_one, c, budget) for c in missing]
+                for f in as_completed(futures):
+                    bar.set_postfix_str(f.result())
+                    bar.update()
+    return RunCount(done=len(missing), cached=len(todo) - len(missing))
+
+
+def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
+    """The tidy rows of one figure (training its missing runs first, if asked)."""
+    if run_missing:
+        run_all(budget, figures=(figure,), progress=False)
+    frames = []
+    for label, cfg in figure_runs(figure, budget):
+        df = pd.read_csv(run_path(cfg, budget))
+        frames.append(df.assign(label=label, figure=figure))
+    df = pd.concat(frames, ignore_index=True)
+    write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    return df
