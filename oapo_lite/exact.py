@@ -24,7 +24,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from oapo_lite.envs.maps import Maze, _reachable
+from oapo_lite.envs.core import STEP_COST
+from oapo_lite.envs.maps import Maze, reachable
 
 MAX_DENSE_ENTRIES = 50_000_000  # S * A_joint * S floats held in P (400 MB)
 
@@ -132,14 +133,14 @@ def from_maze(maze: Maze, gamma: float = 0.99) -> DecPOMDP:
 
     A state is the tuple of agent cells, each over the cells its seat can reach from its
     start (stepping through ``maze.next_cell``, the one move rule). The reward is the
-    environment's: (1/n) sum_k [1{k reaches the star this step} - 0.01 * 1{k is not on the
+    environment's: (1/n) sum_k [1{k reaches the star this step} - STEP_COST * 1{k is not on the
     star at the step's start}]; the state with everyone on the star is absorbing with
     zero reward. Unlike the environment there is *no time limit*: the game is infinite
     horizon and discounted, so J is the value of an endless episode. Seat k observes its
     cell index, a one-to-one function of the environment's observation ``obs_table[cell]``.
     """
     n = maze.n_agents
-    cells = [np.flatnonzero(_reachable(maze.next_cell[k], maze.starts[k])) for k in range(n)]
+    cells = [np.flatnonzero(reachable(maze.next_cell[k], maze.starts[k])) for k in range(n)]
     state_cells = np.stack([g.ravel() for g in np.meshgrid(*cells, indexing="ij")], 1)  # (S, n)
     s_count = len(state_cells)
     joint = np.array(list(itertools.product(range(maze.next_cell.shape[2]), repeat=n)))
@@ -155,7 +156,7 @@ def from_maze(maze: Maze, gamma: float = 0.99) -> DecPOMDP:
     after = maze.next_cell[seats, state_cells[:, None, :], joint[None, :, :]]  # (S, A, n)
     nxt = np.ravel_multi_index(tuple(position[seats, after].transpose(2, 0, 1)), [len(c) for c in cells])
     before_on = state_cells[:, None, :] == maze.star
-    R = ((after == maze.star) & ~before_on).mean(-1) - 0.01 * (~before_on).mean(-1)
+    R = ((after == maze.star) & ~before_on).mean(-1) - STEP_COST * (~before_on).mean(-1)
     P = np.zeros((s_count, len(joint), s_count))
     np.put_along_axis(P, nxt[..., None], 1.0, axis=2)
     start = np.ravel_multi_index([position[k, maze.starts[k]] for k in range(n)], [len(c) for c in cells])

@@ -56,7 +56,9 @@ def data_dir(budget: str) -> Path:
 SIGMAS = (0.01, 0.1, 1.0, 10.0)
 LAMBDAS = (0.2, 0.4, 0.7, 1.0)
 SCHEMES = ("NR", "UR", "RR", "AR")
-SCHEME_LAM = 0.5  # a sharing pair weighs own and peer experience equally
+# Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
+# lambda = 1 / group size (NR's learners keep everything for themselves anyway).
+SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
 
 
 def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
@@ -72,7 +74,7 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
         # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that
         # the mask alone decides, as in the paper's "modified OAPPO parameters".
         "fig5b": [(s, dict(algo="oappo", env="black_blue_red", allowed=s, sigma=float("inf"),
-                           lam=SCHEME_LAM)) for s in SCHEMES],
+                           lam=SCHEME_LAM[s])) for s in SCHEMES],
         "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
     }
     if figure not in grids:
@@ -150,4 +152,7 @@ def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFr
         frames.append(df.assign(label=label, figure=figure))
     df = pd.concat(frames, ignore_index=True)
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    revisions = sorted(df["git_rev"].astype(str).unique())
+    if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
+        print(f"warning: {figure} mixes runs from git revisions {revisions}")
     return df

@@ -58,6 +58,8 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
     Inside the circle of radius sigma their experience is reused (red); outside it is
     omitted (blue). The radial axis is log-scaled so that both 0.001 and 10 fit.
     """
+    if not 0 < sigma < np.inf:
+        raise ValueError(f"sigma must be a positive finite threshold to draw a circle, got {sigma!r}")
     ax = ax or plt.subplots(figsize=(4.5, 4.5))[1]
     floor = sigma / 100
     radius = lambda d: np.log10(max(d, floor) / floor)  # noqa: E731 -- local scale only

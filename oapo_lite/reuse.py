@@ -79,6 +79,8 @@ def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.
 def sample_mapping(m: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Algorithm 1 line 5: draw e, one source per learner, e[i] ~ M[i, :]."""
     m = np.asarray(m, dtype=float)
+    if m.ndim != 2 or (m < 0).any() or not np.allclose(m.sum(1), 1.0):
+        raise ValueError("M must be a matrix of non-negative rows that sum to 1")
     u = rng.random(m.shape[0])
     e = (np.cumsum(m, 1) < u[:, None]).sum(1)
     return np.minimum(e, m.shape[1] - 1)
@@ -100,6 +102,10 @@ def scheme_mask(scheme: str, agents: tuple[str, ...]) -> np.ndarray:
         return np.ones((len(agents), len(agents)), dtype=bool)
     if scheme not in pairs:
         raise ValueError(f"unknown reuse scheme {scheme!r}; choose from ['AR', 'NR', 'RR', 'UR']")
+    missing = {t for pair in pairs[scheme] for t in pair} - set(agents)
+    if missing:
+        raise ValueError(f"scheme {scheme!r} pairs agent types {sorted(missing)}, "
+                         f"but the agents are {list(agents)}")
     mask = np.eye(len(agents), dtype=bool)
     for i, a in enumerate(agents):
         for j, b in enumerate(agents):

@@ -62,6 +62,10 @@ class TabularConfig:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if not 0 < self.backtrack < 1:
             raise ValueError(f"backtrack must lie in (0, 1), got {self.backtrack}")
+        if not self.sigma >= 0:
+            raise ValueError(f"sigma must be >= 0 (a KL threshold), got {self.sigma!r}")
+        if not 0 <= self.lam <= 1:
+            raise ValueError(f"lambda must lie in [0, 1], got {self.lam!r}")
 
 
 @dataclass(frozen=True)

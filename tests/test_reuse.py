@@ -121,3 +121,10 @@ def test_scheme_masks():
     assert reuse.scheme_mask("AR", agents).all()
     with pytest.raises(ValueError, match="unknown reuse scheme 'XX'"):
         reuse.scheme_mask("XX", agents)
+
+
+def test_scheme_mask_names_missing_types_and_mapping_checks_rows():
+    with pytest.raises(ValueError, match=r"\['black', 'red'\]"):
+        reuse.scheme_mask("UR", ("red_0", "black_1", "blue_2"))
+    with pytest.raises(ValueError, match="sum to 1"):
+        reuse.sample_mapping(np.array([[0.5, 0.2], [0.0, 1.0]]), np.random.default_rng(0))

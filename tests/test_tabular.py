@@ -140,3 +140,9 @@ def test_config_rejects_bad_values():
         TabularConfig(iterations=0)
     with pytest.raises(ValueError, match="clip must be > 0"):
         TabularConfig(clip=0.0)
+
+
+@pytest.mark.parametrize("kwargs, match", [(dict(sigma=-1.0), "sigma"), (dict(lam=3.0), "lambda")])
+def test_bad_sigma_lambda_raise(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        TabularConfig(algo="oappo", **kwargs)

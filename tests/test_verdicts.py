@@ -75,3 +75,13 @@ def test_one_seed_is_never_more_than_direction():
     df = curves({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
     verdict = v.faster(v.summary(df), "fast", "slow", "x")
     assert verdict.status == v.DIRECTION
+
+
+def test_censored_seeds_never_make_a_run_faster():
+    # a: 3 seeds converge at 20k, 2 never do; b: every seed converges, later.
+    a = curves({"a": (20_000, 1.0)}, seeds=3)
+    a_stuck = curves({"a": (20_000, 0.5)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)
+    b = curves({"b": (70_000, 1.0)})
+    s = v.summary(pd.concat([a, a_stuck, b]))
+    assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
+    assert v.faster(s, "a", "b", "a faster").status == v.NOT

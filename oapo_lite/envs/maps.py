@@ -205,12 +205,13 @@ def parse_maze(text: str, name: str = "custom") -> Maze:
         starts.append(r * w + c)
     maze = Maze(name=name, terrain=terrain, agents=agents, starts=tuple(starts))
     for k, agent in enumerate(agents):
-        if not _reachable(maze.next_cell[k], maze.starts[k])[maze.star]:
+        if not reachable(maze.next_cell[k], maze.starts[k])[maze.star]:
             raise MapError(f"map {name!r}: the {agent} agent can never reach the star from {start_words[k]}")
     return maze
 
 
-def _reachable(table: np.ndarray, start: int) -> np.ndarray:
+def reachable(table: np.ndarray, start: int) -> np.ndarray:
+    """(n_cells,) bool: the cells one seat's move table can reach from ``start``."""
     seen = np.zeros(table.shape[0], dtype=bool)
     seen[start] = True
     frontier = np.array([start])
