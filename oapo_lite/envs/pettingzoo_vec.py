@@ -35,8 +35,10 @@ def _obs_size(space: spaces.Space) -> int:
 class PettingZooVec:
     """``n_envs`` copies of ``env_fn()`` with auto-reset, presenting ``VecMaze``'s interface.
 
-    Copy k is first reset with ``seed + k``. The global state is ``env.state()`` when the
-    environment implements it, otherwise the concatenated observations. Action masks come
+    ``reset()`` seeds copy k with ``seed + k`` (so every evaluation that resets starts from
+    the same episodes); auto-resets after an episode continue the copy's own randomness.
+    The global state is ``env.state()`` when the environment implements it, otherwise the
+    concatenated observations. Action masks come
     from an ``action_mask`` key of a dict observation or of the info dict; Box action spaces
     give continuous actions (``continuous = True``), clipped to their bounds when stepping.
     ``max_steps`` (optional) truncates episodes that the environment itself lets run on.
@@ -71,7 +73,6 @@ class PettingZooVec:
                           else sum(_obs_size(o) for o, _ in self.spaces))
         self._t = np.zeros(self.n_envs, dtype=np.int64)
         self._returns = np.zeros(self.n_envs, dtype=np.float64)
-        self._seeded = False
 
     @staticmethod
     def _try_state(env) -> np.ndarray | None:
@@ -98,14 +99,13 @@ class PettingZooVec:
         state = self._try_state(env) if self._has_state else np.concatenate(raw)
         return o, avail, state
 
-    def _reset_copy(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        obs, infos = self.envs[k].reset(seed=None if self._seeded else self.seed + k)
+    def _reset_copy(self, k: int, seed: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        obs, infos = self.envs[k].reset(seed=seed)
         self._t[k], self._returns[k] = 0, 0.0
         return self._view(self.envs[k], obs, infos)
 
     def reset(self) -> VecStep:
-        views = [self._reset_copy(k) for k in range(self.n_envs)]
-        self._seeded = True
+        views = [self._reset_copy(k, self.seed + k) for k in range(self.n_envs)]
         obs, avail, state = (np.stack(v) for v in zip(*views))
         no = np.zeros(self.n_envs, dtype=bool)
         nan = np.full(self.n_envs, np.nan, dtype=np.float32)
@@ -127,9 +127,10 @@ class PettingZooVec:
             live = list(env.agents)
             obs, rew, term, trunc, infos = env.step(
                 {a: self._env_action(k, actions[e][k]) for k, a in enumerate(self.agents) if a in live})
-            reward[e] = np.mean([rew[a] for a in live]) if live else 0.0
+            team = float(np.mean([rew[a] for a in live])) if live else 0.0
+            reward[e] = team
             self._t[e] += 1
-            self._returns[e] += reward[e]
+            self._returns[e] += team
             terminated[e] = bool(live) and all(term.get(a, False) for a in live)
             truncated[e] = not terminated[e] and (
                 not env.agents or all(term.get(a, False) or trunc.get(a, False) for a in live)
@@ -138,7 +139,7 @@ class PettingZooVec:
             if terminated[e] or truncated[e]:
                 ep_return[e] = self._returns[e]
                 ep_success[e] = next((i["episode_success"] for i in infos.values() if "episode_success" in i), np.nan)
-                now = self._reset_copy(e)
+                now = self._reset_copy(e, None)
             else:
                 now = final
             for key, value in zip(("obs", "avail", "state"), now):
@@ -151,8 +152,8 @@ class PettingZooVec:
 
     def get_state(self) -> dict:
         """Deep copies of the environment copies and the episode counters (for checkpoints)."""
-        return copy.deepcopy({"envs": self.envs, "t": self._t, "returns": self._returns, "seeded": self._seeded})
+        return copy.deepcopy({"envs": self.envs, "t": self._t, "returns": self._returns})
 
     def set_state(self, d: dict) -> None:
         d = copy.deepcopy(d)
-        self.envs, self._t, self._returns, self._seeded = d["envs"], d["t"], d["returns"], d["seeded"]
+        self.envs, self._t, self._returns = d["envs"], d["t"], d["returns"]

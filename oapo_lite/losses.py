@@ -1,0 +1,68 @@
+"""Objectives of the neural track: GAE, the off-agent surrogates (Eq. 7, Eq. 8), the
+sequential factor (rho in Eq. 6-8), the trust-region KL, and the critic's loss.
+
+Shapes: a learner sees S sources (agents), each with the same B joint samples (time x env),
+so per-source tensors are (S, B) and joint tensors (advantage, factor) are (B,).
+"""
+from __future__ import annotations
+
+import torch
+
+
+def gae(reward: torch.Tensor, value: torch.Tensor, next_value: torch.Tensor, done: torch.Tensor,
+        gamma: float, lam: float) -> torch.Tensor:
+    """Generalised advantage estimation of the joint advantage A(s, a) (Algorithm 1 line 4).
+
+    All (T, N). ``next_value`` is the value of the step's successor: V(s_{t+1}) if the episode
+    goes on, V(final state) on truncation, 0 on termination; ``done`` cuts the recursion.
+    """
+    delta = reward + gamma * next_value - value
+    adv = torch.zeros_like(reward)
+    running = torch.zeros_like(reward[0])
+    for t in reversed(range(reward.shape[0])):
+        running = delta[t] + gamma * lam * torch.where(done[t], 0.0, running)
+        adv[t] = running
+    return adv
+
+
+def normalise(x: torch.Tensor) -> torch.Tensor:
+    """Batch-normalised advantage (as HARL/MAPPO): zero mean, unit standard deviation."""
+    return (x - x.mean()) / (x.std() + 1e-8)
+
+
+def off_agent_objective(logp_new: torch.Tensor, logp_old: torch.Tensor, weights: torch.Tensor,
+                        factor: torch.Tensor, adv: torch.Tensor, clip: float | None) -> torch.Tensor:
+    """Eq. 8 (``clip`` given) or Eq. 7's surrogate (``clip=None``) of one learner i.
+
+    ``logp_new[j]`` = log pi_i_new(a_j | o_j) on source j's samples, ``logp_old[j]`` = log
+    pi_j_old(a_j | o_j), the behaviour probability stored at rollout, so the off-agent ratio
+    is r_ij = pi_i_new(a_j|o_j) / pi_j_old(a_j|o_j). Returns
+    sum_j weights[j] * mean_b min(r_ij rho A, clip(r_ij, 1 +- eps) rho A), to be maximised.
+    """
+    ratio = torch.exp(logp_new - logp_old)
+    scaled = factor * adv
+    surrogate = ratio * scaled
+    if clip is not None:
+        surrogate = torch.min(surrogate, ratio.clamp(1 - clip, 1 + clip) * scaled)
+    return (weights * surrogate.mean(-1)).sum()
+
+
+def weighted_kl(kl_per_obs: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """Eq. 7's constraint: sum_j weights[j] * mean over source j's observations of
+    KL(pi_i_old(.|o_j) || pi_i(.|o_j)). ``kl_per_obs`` is (S, B)."""
+    return (weights * kl_per_obs.mean(-1)).sum()
+
+
+def update_factor(factor: torch.Tensor, logp_new_own: torch.Tensor, logp_old_own: torch.Tensor) -> torch.Tensor:
+    """rho of Eq. 6-8: after a learner is updated, multiply by its own-seat ratio
+    pi_new(a|o) / pi_old(a|o) on its own samples (the product over the seats it controls)."""
+    return factor * torch.exp((logp_new_own - logp_old_own).sum(0))
+
+
+def value_loss(value: torch.Tensor, value_old: torch.Tensor, target: torch.Tensor, clip: float,
+               delta: float = 10.0) -> torch.Tensor:
+    """Clipped Huber value loss (HARL): the worse of the raw and the clipped prediction."""
+    clipped = value_old + (value - value_old).clamp(-clip, clip)
+    raw_loss = torch.nn.functional.huber_loss(value, target, reduction="none", delta=delta)
+    clip_loss = torch.nn.functional.huber_loss(clipped, target, reduction="none", delta=delta)
+    return torch.max(raw_loss, clip_loss).mean()

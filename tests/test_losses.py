@@ -1,0 +1,201 @@
+"""Objectives and distributions of the neural track against independent computations."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from oapo_lite import reuse
+from oapo_lite.losses import gae, normalise, off_agent_objective, update_factor, value_loss, weighted_kl
+from oapo_lite.nets import Actors, Categorical, Gaussian, ValueNorm
+
+torch.set_num_threads(1)
+
+
+def test_gae_matches_the_discounted_sum_of_td_errors():
+    """A_t = sum_k (gamma lam)^k delta_{t+k} up to the end of the episode, by brute force."""
+    rng = np.random.default_rng(0)
+    T, N, gamma, lam = 12, 3, 0.9, 0.8
+    reward, value, next_value = rng.normal(size=(3, T, N))
+    done = rng.random((T, N)) < 0.2
+    delta = reward + gamma * next_value - value
+    expected = np.zeros((T, N))
+    for e in range(N):
+        for t in range(T):
+            for k in range(t, T):
+                expected[t, e] += (gamma * lam) ** (k - t) * delta[k, e]
+                if done[k, e]:
+                    break
+    got = gae(*(torch.tensor(x) for x in (reward, value, next_value, done)), gamma, lam)
+    np.testing.assert_allclose(got.numpy(), expected, rtol=1e-10)
+
+
+def test_gae_with_lambda_one_is_the_monte_carlo_return_minus_value():
+    reward = torch.tensor([[1.0], [0.0], [2.0]])
+    value = torch.tensor([[0.5], [0.1], [0.3]])
+    next_value = torch.tensor([[0.1], [0.3], [0.0]])  # the episode terminates at t = 2
+    done = torch.tensor([[False], [False], [True]])
+    got = gae(reward, value, next_value, done, 0.5, 1.0)
+    returns = torch.tensor([[1 + 0.5 * 0 + 0.25 * 2], [0 + 0.5 * 2], [2.0]])
+    torch.testing.assert_close(got, returns - value)
+
+
+def _sources(seed=0, S=3, B=50):
+    g = torch.Generator().manual_seed(seed)
+    logp_old = -torch.rand(S, B, generator=g) * 2
+    logp_new = (logp_old + 0.5 * torch.randn(S, B, generator=g)).requires_grad_()
+    factor = torch.exp(0.3 * torch.randn(B, generator=g))
+    adv = torch.randn(B, generator=g)
+    weights = torch.softmax(torch.randn(S, generator=g), 0)
+    return logp_new, logp_old, weights, factor, adv
+
+
+def test_surrogate_eq7_is_the_weighted_mean_of_ratio_times_factor_times_advantage():
+    logp_new, logp_old, w, factor, adv = _sources()
+    got = off_agent_objective(logp_new, logp_old, w, factor, adv, clip=None)
+    ratio = np.exp(logp_new.detach().numpy() - logp_old.numpy())
+    expected = sum(w[j].item() * np.mean(ratio[j] * factor.numpy() * adv.numpy()) for j in range(3))
+    assert got.item() == pytest.approx(expected, rel=1e-5)
+
+
+def test_clipped_samples_carry_no_gradient_eq8():
+    """PPO clip: a sample whose ratio left [1 - eps, 1 + eps] in the advantage's direction
+    stops pushing; every other sample's gradient is w_j rho A r / B."""
+    logp_new, logp_old, w, factor, adv = _sources(1)
+    clip = 0.2
+    off_agent_objective(logp_new, logp_old, w, factor, adv, clip).backward()
+    ratio = torch.exp(logp_new - logp_old).detach()
+    scaled = factor * adv
+    stopped = ((ratio > 1 + clip) & (scaled > 0)) | ((ratio < 1 - clip) & (scaled < 0))
+    assert stopped.any() and (~stopped).any()
+    assert (logp_new.grad[stopped] == 0).all()
+    expected = (w[:, None] * scaled * ratio / adv.shape[0])[~stopped]
+    torch.testing.assert_close(logp_new.grad[~stopped], expected)
+
+
+def test_uniform_weights_over_sources_is_mappo_on_the_concatenated_batch():
+    """MAPPO's loss is one mean over every agent's samples; with a shared net and M = 1/n the
+    off-agent mixture gives the same number (equal batch sizes, factor 1)."""
+    logp_new, logp_old, _, _, adv = _sources(2)
+    S = logp_new.shape[0]
+    mixture = off_agent_objective(logp_new, logp_old, torch.full((S,), 1 / S), torch.ones(adv.shape), adv, 0.2)
+    r = torch.exp(logp_new - logp_old).reshape(-1)
+    a = adv.repeat(S)
+    mappo = torch.min(r * a, r.clamp(0.8, 1.2) * a).mean()
+    torch.testing.assert_close(mixture, mappo)
+
+
+def test_factor_is_the_product_of_own_seat_ratios():
+    g = torch.Generator().manual_seed(3)
+    new, old = -torch.rand(2, 4, 10, generator=g)  # 4 learners, 10 samples each
+    factor = torch.ones(10)
+    for k in range(4):
+        factor = update_factor(factor, new[k : k + 1], old[k : k + 1])
+    explicit = torch.prod(torch.exp(new) / torch.exp(old), 0)
+    torch.testing.assert_close(factor, explicit)
+
+
+def test_weighted_kl_mixes_per_source_means():
+    kl = torch.tensor([[1.0, 3.0], [10.0, 30.0]])
+    assert weighted_kl(kl, torch.tensor([0.25, 0.75])).item() == pytest.approx(0.25 * 2 + 0.75 * 20)
+
+
+def test_clipped_value_loss_takes_the_worse_of_raw_and_clipped():
+    value, old, target = torch.tensor([1.0, 0.0]), torch.tensor([0.0, 0.0]), torch.tensor([1.0, 0.05])
+    # sample 0: raw error 0, clipped prediction 0.2 -> error 0.8; sample 1: both 0.05
+    expected = np.mean([0.5 * 0.8**2, 0.5 * 0.05**2])
+    assert value_loss(value, old, target, clip=0.2).item() == pytest.approx(expected)
+
+
+def test_normalise_gives_zero_mean_unit_std():
+    x = normalise(torch.randn(1000, generator=torch.Generator().manual_seed(0)) * 5 + 3)
+    assert abs(x.mean().item()) < 1e-6 and x.std().item() == pytest.approx(1.0, abs=1e-4)
+
+
+def test_value_norm_after_one_batch_uses_that_batch_mean_and_variance():
+    x = torch.randn(500, generator=torch.Generator().manual_seed(1)) * 3 + 2
+    norm = ValueNorm()
+    norm.update(x)
+    z = norm.normalize(x)
+    assert z.mean().item() == pytest.approx(0.0, abs=1e-4)
+    assert z.double().pow(2).mean().item() == pytest.approx(1.0, abs=1e-4)  # population variance
+    torch.testing.assert_close(norm.denormalize(z), x)
+
+
+def test_categorical_head_agrees_with_torch_distributions_and_respects_masks():
+    g = torch.Generator().manual_seed(0)
+    out, out2 = torch.randn(2, 40, 5, generator=g)
+    avail = torch.rand(40, 5, generator=g) > 0.3
+    avail[:, 0] = True
+    d, d2 = Categorical.params(out, avail, None), Categorical.params(out2, avail, None)
+    ref = torch.distributions.Categorical(logits=out.masked_fill(~avail, -1e10))
+    ref2 = torch.distributions.Categorical(logits=out2.masked_fill(~avail, -1e10))
+    a = Categorical.sample(d, g)
+    assert avail.gather(1, a[:, None]).all()
+    torch.testing.assert_close(Categorical.log_prob(d, a), ref.log_prob(a))
+    torch.testing.assert_close(Categorical.entropy(d), ref.entropy())
+    torch.testing.assert_close(Categorical.kl(d, d2), torch.distributions.kl_divergence(ref, ref2))
+
+
+def test_categorical_sampling_matches_the_probabilities():
+    d = torch.log(torch.tensor([[0.1, 0.6, 0.0, 0.3]])).expand(20000, 4)
+    a = Categorical.sample(d, torch.Generator().manual_seed(0))
+    freq = torch.bincount(a, minlength=4).double() / len(a)
+    np.testing.assert_allclose(freq.numpy(), [0.1, 0.6, 0.0, 0.3], atol=0.015)
+
+
+def test_gaussian_head_agrees_with_torch_distributions():
+    g = torch.Generator().manual_seed(0)
+    mean, mean2 = torch.randn(2, 30, 3, generator=g)
+    log_std, log_std2 = 0.3 * torch.randn(2, 1, 3, generator=g)
+    d = Gaussian.params(mean[None], None, log_std)[0]
+    d2 = Gaussian.params(mean2[None], None, log_std2)[0]
+    ref = torch.distributions.Normal(mean, log_std[0].exp())
+    ref2 = torch.distributions.Normal(mean2, log_std2[0].exp())
+    a = Gaussian.sample(d, g)
+    torch.testing.assert_close(Gaussian.log_prob(d, a), ref.log_prob(a).sum(-1))
+    torch.testing.assert_close(Gaussian.entropy(d), ref.entropy().sum(-1))
+    torch.testing.assert_close(Gaussian.kl(d, d2), torch.distributions.kl_divergence(ref, ref2).sum(-1))
+
+
+@pytest.mark.parametrize("reduce", ["max", "mean"])
+def test_kl_matrix_of_both_heads_agree_with_a_per_pair_loop(reduce):
+    """K[i, j] = reduce_b KL(pi_j(.|o_j) || pi_i(.|o_j)), checked pair by pair."""
+    g = torch.Generator().manual_seed(5)
+    for head, P in ((Categorical, 4), (Gaussian, 6)):
+        d = torch.randn(3, 3, 20, P, generator=g)
+        if head is Categorical:
+            d = torch.log_softmax(d, -1)
+        K = head.kl_matrix(d, reduce)
+        for i in range(3):
+            for j in range(3):
+                kl = head.kl(d[j, j], d[i, j])
+                assert K[i, j] == pytest.approx((kl.max() if reduce == "max" else kl.mean()).item(), rel=1e-5, abs=1e-7)
+        assert np.allclose(np.diag(K), 0.0, atol=1e-7)
+
+
+def test_batched_actors_equal_separate_forwards():
+    """One baddbmm forward over stacked nets = each net run on its own rows."""
+    gen = torch.Generator().manual_seed(0)
+    actors = Actors(3, obs_dim=7, n_actions=4, hidden=(8, 8), continuous=False, gen=gen)
+    obs = torch.randn(3, 11, 7, generator=gen)
+    avail = torch.ones(3, 11, 4, dtype=torch.bool)
+    together = actors(obs, [2, 0, 2], avail)
+    for row, net in enumerate([2, 0, 2]):
+        alone = actors(obs[row : row + 1], [net], avail[row : row + 1])[0]
+        torch.testing.assert_close(together[row], alone)
+    assert math.isclose(together.exp().sum(-1).mean().item(), 1.0, rel_tol=1e-6)
+
+
+def test_kl_matrix_feeds_the_reuse_rule():
+    """The categorical KL matrix goes through reuse.kl_matrix: identical nets are at distance 0."""
+    gen = torch.Generator().manual_seed(0)
+    actors = Actors(2, 5, 3, (8,), False, gen)
+    with torch.no_grad():
+        for p1, p0 in zip(actors.weights[1], actors.weights[0]):
+            p1.copy_(p0)
+    obs = torch.randn(1, 10, 5, generator=gen).expand(2, 10, 5)
+    d = actors(obs, [0, 1], torch.ones(2, 10, 3, dtype=torch.bool))
+    K = Categorical.kl_matrix(torch.stack([d, d]), "max")
+    assert (K == 0).all()
+    assert (reuse.oapo_matrix(K, 0.0, 0.5) == 0.5).all()

@@ -1,0 +1,314 @@
+"""The training loop: algorithm identities, learning, determinism, resume, and the PettingZoo path."""
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from oapo_lite import __main__ as cli
+from oapo_lite.envs import MazeParallelEnv, make_vec, parse_maze
+from oapo_lite.envs.pettingzoo_vec import PettingZooVec
+from oapo_lite.nets import Actors
+from oapo_lite.train import ALGOS, Sources, TrainConfig, collect, learner_dists, load_checkpoint, train, update_actors
+
+torch.set_num_threads(1)
+
+# Both agents walk right along one corridor: 3 steps each, optimum 1 - 0.03 = 0.97.
+CORRIDOR = """\
+agents: red black
+start: 1,1 1,1
+######
+#...*#
+######
+"""
+TINY = dict(env=CORRIDOR, n_envs=16, rollout_len=10, max_steps=10, eval_every=2, eval_episodes=16)
+SMALL_BR = dict(env="black_red", n_envs=8, rollout_len=25, steps=600, eval_every=3, eval_episodes=8)
+
+
+def _run(tmp_path, name, **kw) -> pd.DataFrame:
+    return train(TrainConfig(**kw), tmp_path / name, resume=False, progress=False)
+
+
+def _params(tmp_path, name) -> dict:
+    return load_checkpoint(tmp_path / name)["actors"]
+
+
+def _same(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("bad, words", [
+    (dict(algo="ppo"), ["ppo", "oappo", "mappo"]),
+    (dict(env="no_such_map"), ["no_such_map", "black_red"]),
+    (dict(sigma=-0.1), ["sigma", "-0.1", ">= 0"]),
+    (dict(lam=1.5), ["lam", "1.5", "[0, 1]"]),
+    (dict(kl_reduce="median"), ["median", "max", "mean"]),
+    (dict(reuse_mode="all"), ["all", "weights", "sample"]),
+    (dict(allowed="XR"), ["XR", "NR", "UR", "RR", "AR"]),
+    (dict(steps=10), ["steps", "10", "one iteration"]),
+    (dict(n_envs=0), ["n_envs", "0"]),
+    (dict(hidden=(64, -1)), ["hidden"]),
+    (dict(backtrack=1.0), ["backtrack", "(0, 1)"]),
+])
+def test_bad_config_values_raise_naming_the_value_and_the_allowed_set(bad, words):
+    with pytest.raises(ValueError) as err:
+        TrainConfig(**bad)
+    for word in words:
+        assert word in str(err.value)
+
+
+def test_a_wrong_allowed_mask_shape_raises(tmp_path):
+    with pytest.raises(ValueError, match=r"allowed mask has shape \(3, 3\)"):
+        _run(tmp_path, "bad", algo="oappo", allowed=np.ones((3, 3), bool), **SMALL_BR)
+
+
+@pytest.mark.parametrize("algo", sorted(ALGOS))
+def test_a_short_run_on_a_corridor_reaches_the_oracle_optimum(tmp_path, algo):
+    rows = _run(tmp_path, algo, algo=algo, steps=160 * 30, **TINY)
+    assert rows["frac_opt"].iloc[0] < 0.5  # the untrained policy is far from it
+    assert rows["frac_opt"].iloc[-1] >= 0.95
+    assert rows["eval_success"].iloc[-1] == 1.0
+
+
+def test_the_same_config_and_seed_give_identical_results(tmp_path):
+    a = _run(tmp_path, "a", algo="oappo", **SMALL_BR)
+    b = _run(tmp_path, "b", algo="oappo", **SMALL_BR)
+    pd.testing.assert_frame_equal(a, b)
+    assert _same(_params(tmp_path, "a"), _params(tmp_path, "b"))
+    c = _run(tmp_path, "c", algo="oappo", seed=1, **SMALL_BR)
+    assert not _same(_params(tmp_path, "a"), _params(tmp_path, "c"))
+
+
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo"])  # Adam states, and hand-made steps
+def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path, algo):
+    cfg = TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, **TINY)
+    full = train(cfg, tmp_path / "full", progress=False)
+
+    def crash(metrics):
+        if metrics["iteration"] == 5:  # the last checkpoint is from iteration 4
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    assert load_checkpoint(tmp_path / "resumed")["iteration"] == 4
+    resumed = train(cfg, tmp_path / "resumed", progress=False)
+    pd.testing.assert_frame_equal(full, resumed)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "full" / "results.csv"),
+                                  pd.read_csv(tmp_path / "resumed" / "results.csv"))
+    assert _same(_params(tmp_path, "full"), _params(tmp_path, "resumed"))
+    with pytest.raises(ValueError, match="different config"):
+        train(TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, **{**TINY, "lam": 0.5}),
+              tmp_path / "full", progress=False)
+
+
+def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
+    """Eq. 9 with sigma = 0 (no other policy is that close) or lambda = 1 gives M = I."""
+    _run(tmp_path, "happo", algo="happo", **SMALL_BR)
+    _run(tmp_path, "sigma0", algo="oappo", sigma=0.0, **SMALL_BR)
+    _run(tmp_path, "lam1", algo="oappo", lam=1.0, **SMALL_BR)
+    _run(tmp_path, "reuse", algo="oappo", **SMALL_BR)
+    happo = _params(tmp_path, "happo")
+    assert _same(happo, _params(tmp_path, "sigma0"))
+    assert _same(happo, _params(tmp_path, "lam1"))
+    assert not _same(happo, _params(tmp_path, "reuse"))  # reuse does change the update
+
+
+def test_oappo_with_one_shared_network_and_uniform_reuse_is_bitwise_mappo(tmp_path):
+    """A shared net is at KL 0 from itself, so Eq. 9 spreads each seat's row evenly: the
+    mean over seats is 1/n for every source, MAPPO's matrix."""
+    _run(tmp_path, "mappo", algo="mappo", **SMALL_BR)
+    rows = _run(tmp_path, "oappo", algo="oappo", shared=True, lam=0.5, **SMALL_BR)
+    assert _same(_params(tmp_path, "mappo"), _params(tmp_path, "oappo"))
+    assert rows["reuse_matrix"].iloc[-1] == "[[0.5, 0.5], [0.5, 0.5]]"
+    _run(tmp_path, "happo", algo="happo", **SMALL_BR)
+    assert not _same(_params(tmp_path, "mappo"), _params(tmp_path, "happo"))
+
+
+def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, monkeypatch):
+    """Algorithm 1 line 5: in "sample" mode W is one-hot per learner, on a source M allows."""
+    import oapo_lite.train as train_module
+
+    seen = []
+    real = train_module.update_actors
+
+    def spy(actors, opts, batch, W, *args):
+        seen.append(W.copy())
+        return real(actors, opts, batch, W, *args)
+
+    monkeypatch.setattr(train_module, "update_actors", spy)
+    rows = _run(tmp_path, "sample", algo="oappo", reuse_mode="sample", sigma=10.0, lam=0.2,
+                **{**SMALL_BR, "steps": 2000})
+    history = rows.attrs["history"]
+    drawn = np.array([W.argmax(1) for W in seen])
+    for W, h in zip(seen, history):
+        M = np.array(json.loads(h["reuse_matrix"]))
+        assert ((W == 0) | (W == 1)).all() and (W.sum(1) == 1).all()
+        assert (M[np.arange(2), W.argmax(1)] > 0).all()
+    assert (drawn != np.arange(2)).any()  # with lam = 0.2 the other seat is drawn sometimes
+
+
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo"])
+def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
+    """After the sequential pass, rho = prod_i pi_i_new(a_i|o_i) / pi_i_old(a_i|o_i) over every
+    learner, each evaluated with its final parameters (which no later learner touches)."""
+    cfg = TrainConfig(algo=algo, env="black_blue_red", n_envs=8, rollout_len=20, steps=160, sigma=10.0)
+    env = make_vec(cfg.env, cfg.n_envs, cfg.max_steps)
+    actors = Actors(3, env.obs_dim, env.n_actions, cfg.hidden, False, torch.Generator().manual_seed(0))
+    opts = [torch.optim.Adam(actors.net_params(k), lr=cfg.lr) for k in range(3)]
+    clock = {"env": 0.0, "policy": 0.0}
+    batch, _ = collect(env, env.reset(), actors, [0, 1, 2], cfg.rollout_len, torch.Generator().manual_seed(1), clock)
+    W = np.full((3, 3), 1 / 3)
+    adv = torch.randn(batch.act.shape[1], generator=torch.Generator().manual_seed(2))
+    factor, _, _ = update_actors(actors, opts, batch, W, [0, 1, 2], [2, 0, 1], adv, ALGOS[algo], cfg,
+                                 np.random.default_rng(0))
+    explicit = torch.ones_like(factor)
+    with torch.no_grad():
+        for k in range(3):
+            src = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]])
+            logp_new = actors.head.log_prob(learner_dists(actors, batch.inputs, src)[0], batch.act[k])
+            explicit *= torch.exp(logp_new) / torch.exp(batch.logp[k])
+    assert not torch.allclose(factor, torch.ones_like(factor))  # the agents did move
+    torch.testing.assert_close(factor, explicit, rtol=1e-4, atol=1e-6)
+
+
+def test_every_accepted_trpo_step_stays_within_delta(tmp_path):
+    rows = _run(tmp_path, "trpo", algo="oatrpo", kl_threshold=0.005, **SMALL_BR)
+    history = rows.attrs["history"]
+    kls = [k for h in history for k in h["trpo_kls"] if not math.isnan(k)]
+    assert len(kls) >= len(history)  # most learner steps are accepted
+    assert max(kls) <= 0.005
+
+
+def test_results_csv_holds_every_config_field_and_the_revision(tmp_path):
+    rows = _run(tmp_path, "csv", algo="happo", **SMALL_BR)
+    on_disk = pd.read_csv(tmp_path / "csv" / "results.csv")
+    for field in TrainConfig.__dataclass_fields__:
+        assert field in on_disk.columns
+    for column in ("git_rev", "step", "eval_return", "frac_opt", "eval_success", "kl_matrix", "reuse_matrix"):
+        assert column in on_disk.columns
+    assert list(on_disk["step"]) == [0, 600] and len(rows) == 2
+    assert not [p for p in (tmp_path / "csv").iterdir() if "tmp" in p.name]
+
+
+def test_the_cli_trains_and_prints_a_summary(tmp_path, capsys):
+    code = cli.main(["train", "--algo", "happo", "--env", "black_red", "--steps", "400", "--n-envs", "8",
+                     "--rollout-len", "25", "--eval-episodes", "4", "--out", str(tmp_path), "--no-progress"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "happo on black_red, seed 0: 400 env steps" in out and "of the optimum" in out
+    assert (tmp_path / "happo_black_red_s0" / "results.csv").exists()
+    assert cli.main(["train", "--sigma", "-1", "--out", str(tmp_path)]) == 2
+
+
+def test_pettingzoo_vec_on_the_maze_parallel_env_replays_vecmaze():
+    maze = parse_maze("agents: red black\nstart: 1,1 1,1\n#####\n#..*#\n#####\n")
+    pz = PettingZooVec(lambda: MazeParallelEnv(maze, max_steps=4), n_envs=5, seed=0)
+    vec = make_vec(maze, 5, max_steps=4)
+    assert (pz.n_agents, pz.obs_dim, pz.state_dim, pz.n_actions) == (vec.n_agents, vec.obs_dim, vec.state_dim, 5)
+    rng = np.random.default_rng(0)
+    steps = [(pz.reset(), vec.reset())] + [(pz.step(a), vec.step(a)) for a in rng.integers(0, 5, (40, 5, 2))]
+    ended = {"terminated": 0, "truncated": 0}
+    for a, b in steps:
+        for name in a.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        ended["terminated"] += b.terminated.sum()
+        ended["truncated"] += b.truncated.sum()
+    assert min(ended.values()) > 0  # both kinds of episode end were compared
+
+
+def test_training_through_pettingzoo_matches_training_on_vecmaze(tmp_path):
+    kw = dict(algo="oappo", n_envs=4, rollout_len=10, steps=80, eval_every=1, eval_episodes=4, max_steps=10,
+              bootstrap_truncation=True)
+    vec = _run(tmp_path, "vec", env=CORRIDOR, **kw)
+    pz = _run(tmp_path, "pz", env_fn=lambda: MazeParallelEnv(parse_maze(CORRIDOR), max_steps=10), **kw)
+    assert _same(_params(tmp_path, "vec"), _params(tmp_path, "pz"))
+    # the parallel env hands out float32 rewards, the vector core sums them in float64
+    np.testing.assert_allclose(vec["eval_return"], pz["eval_return"], rtol=1e-6)
+    assert pz["frac_opt"].isna().all()  # no oracle for a foreign environment
+
+
+class Toy(ParallelEnv):
+    """Two agents with chosen spaces; reward = agent a's first action dimension, 5 steps."""
+
+    metadata = {"name": "toy_v0"}
+
+    def __init__(self, obs_dims=(3, 3), continuous=False, masked=None):
+        self.possible_agents = ["a", "b"]
+        self.continuous, self.masked = continuous, masked
+        obs = {k: spaces.Box(-1, 1, (d,), np.float32) for k, d in zip(self.possible_agents, obs_dims)}
+        if masked == "obs":
+            obs = {k: spaces.Dict({"observation": o, "action_mask": spaces.MultiBinary(4)}) for k, o in obs.items()}
+        self._obs = obs
+        self._act = {k: spaces.Box(-1, 1, (2,), np.float32) if continuous else spaces.Discrete(4)
+                     for k in self.possible_agents}
+
+    def observation_space(self, agent):
+        return self._obs[agent]
+
+    def action_space(self, agent):
+        return self._act[agent]
+
+    def _mask(self):
+        return np.array([1, 0, 1, self.t % 2], np.int8)
+
+    def _observe(self):
+        out = {}
+        for k in self.agents:
+            space = self._obs[k]["observation"] if self.masked == "obs" else self._obs[k]
+            o = np.full(space.shape, self.t / 5, np.float32)
+            out[k] = {"observation": o, "action_mask": self._mask()} if self.masked == "obs" else o
+        return out
+
+    def _infos(self, agents):
+        return {k: {"action_mask": self._mask()} if self.masked == "info" else {} for k in agents}
+
+    def reset(self, seed=None, options=None):
+        self.agents, self.t = list(self.possible_agents), 0
+        return self._observe(), self._infos(self.agents)
+
+    def step(self, actions):
+        if self.masked:
+            assert all(actions[k] != 1 and (actions[k] != 3 or self.t % 2) for k in actions), "masked action taken"
+        self.t += 1
+        r = float(np.ravel(actions["a"])[0])
+        done = self.t >= 5
+        agents = self.agents
+        obs = self._observe()
+        if done:
+            self.agents = []
+        return (obs, {k: r for k in agents}, {k: done for k in agents}, {k: False for k in agents},
+                self._infos(agents))
+
+
+def test_reuse_between_agents_with_different_spaces_raises(tmp_path):
+    kw = dict(env_fn=lambda: Toy(obs_dims=(3, 5)), n_envs=2, rollout_len=10, steps=20, eval_episodes=2)
+    for algo in ("oappo", "mappo"):
+        with pytest.raises(ValueError, match=r"reuse between agents 'a' and 'b' needs equal spaces.*Box"):
+            _run(tmp_path, algo, algo=algo, **kw)
+    # no reuse needed: padded observations, separate nets, it trains
+    assert len(_run(tmp_path, "happo", algo="happo", **kw)) == 2
+    # reuse forbidden between the two by the allowed mask: fine as well
+    assert len(_run(tmp_path, "masked", algo="oappo", allowed="NR", **kw)) == 2
+
+
+@pytest.mark.parametrize("where", ["obs", "info"])
+def test_action_masks_through_pettingzoo_are_respected(tmp_path, where):
+    masked = PettingZooVec(lambda: Toy(masked=where), n_envs=2, seed=0)
+    step = masked.reset()
+    np.testing.assert_array_equal(step.avail[:, 0], [[True, False, True, False]] * 2)
+    np.testing.assert_array_equal(masked.step(np.zeros((2, 2), int)).avail[:, 1], [[True, False, True, True]] * 2)
+    assert masked.n_actions == 4 and not masked.continuous and masked.obs_dim == 3
+    # the Toy env asserts that no masked action is ever sent
+    _run(tmp_path, "masked", algo="oappo", env_fn=lambda: Toy(masked=where), n_envs=4, rollout_len=10, steps=200,
+         eval_episodes=2)
+
+
+def test_continuous_actions_through_pettingzoo(tmp_path):
+    for algo in ("happo", "oatrpo"):
+        rows = _run(tmp_path, f"box_{algo}", algo=algo, env_fn=lambda: Toy(continuous=True), n_envs=4,
+                    rollout_len=10, steps=400, eval_episodes=4, eval_every=1)
+        assert np.isfinite(rows["eval_return"]).all()
