@@ -70,7 +70,7 @@ def train_main(argv: list[str]) -> int:
     print(f"{cfg.algo} on {name}, seed {cfg.seed}: {int(last['step'])} env steps in {wall:.1f} s")
     print(f"  final evaluation: return {last['eval_return']:.3f}, {last['frac_opt']:.1%} of the optimum, "
           f"success {last['eval_success']:.0%}")
-    print(f"  95% of the optimum first reached at: {int(hit.iloc[0]) if len(hit) else 'never'} env steps")
+    print(f"  95% of the optimum first reached at: {f'{int(hit.iloc[0])} env steps' if len(hit) else 'never'}")
     print(f"  results: {run_dir / 'results.csv'}")
     return 0
 

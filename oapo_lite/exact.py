@@ -178,12 +178,20 @@ def random_game(rng: np.random.Generator, n_agents: int = 2, n_states: int = 4, 
 
 def random_policies(game: DecPOMDP, rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
     """Softmax tables with N(0, scale^2) logits, one per seat: (n_agents, n_obs, n_actions)."""
-    logits = rng.normal(0.0, scale, (game.n_agents, game.n_obs, game.n_actions))
-    p = np.exp(logits - logits.max(-1, keepdims=True))
-    return p / p.sum(-1, keepdims=True)
+    return softmax(rng.normal(0.0, scale, (game.n_agents, game.n_obs, game.n_actions)))
 
 
 # ----------------------------------------------------------------------------- policies
+
+def log_softmax(logits: np.ndarray) -> np.ndarray:
+    shifted = logits - logits.max(-1, keepdims=True)
+    return shifted - np.log(np.exp(shifted).sum(-1, keepdims=True))
+
+
+def softmax(logits: np.ndarray) -> np.ndarray:
+    """Policy tables from logits, along the last axis."""
+    return np.exp(log_softmax(logits))
+
 
 def _tables(game: DecPOMDP, pis) -> np.ndarray:
     tables = np.asarray(pis, dtype=float)

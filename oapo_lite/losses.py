@@ -2,7 +2,9 @@
 sequential factor (rho in Eq. 6-8), the trust-region KL, and the critic's loss.
 
 Shapes: a learner sees S sources (agents), each with the same B joint samples (time x env),
-so per-source tensors are (S, B) and joint tensors (advantage, factor) are (B,).
+so per-source tensors are (S, B) and joint tensors (advantage, factor) are (B,). ``active``
+(S, B) bool, or None for all, marks the samples on which the agent acted; the others (an
+agent that left a PettingZoo episode early) contribute nothing.
 """
 from __future__ import annotations
 
@@ -30,8 +32,17 @@ def normalise(x: torch.Tensor) -> torch.Tensor:
     return (x - x.mean()) / (x.std() + 1e-8)
 
 
+def source_mean(x: torch.Tensor, active: torch.Tensor | None) -> torch.Tensor:
+    """Mean over the last axis (a source's samples) of the samples where the agent acted;
+    ``active=None`` is the plain mean, bit for bit."""
+    if active is None:
+        return x.mean(-1)
+    return torch.where(active, x, 0.0).sum(-1) / active.sum(-1).clamp_min(1)
+
+
 def off_agent_objective(logp_new: torch.Tensor, logp_old: torch.Tensor, weights: torch.Tensor,
-                        factor: torch.Tensor, adv: torch.Tensor, clip: float | None) -> torch.Tensor:
+                        factor: torch.Tensor, adv: torch.Tensor, clip: float | None,
+                        active: torch.Tensor | None = None) -> torch.Tensor:
     """Eq. 8 (``clip`` given) or Eq. 7's surrogate (``clip=None``) of one learner i.
 
     ``logp_new[j]`` = log pi_i_new(a_j | o_j) on source j's samples, ``logp_old[j]`` = log
@@ -44,19 +55,24 @@ def off_agent_objective(logp_new: torch.Tensor, logp_old: torch.Tensor, weights:
     surrogate = ratio * scaled
     if clip is not None:
         surrogate = torch.min(surrogate, ratio.clamp(1 - clip, 1 + clip) * scaled)
-    return (weights * surrogate.mean(-1)).sum()
+    return (weights * source_mean(surrogate, active)).sum()
 
 
-def weighted_kl(kl_per_obs: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+def weighted_kl(kl_per_obs: torch.Tensor, weights: torch.Tensor, active: torch.Tensor | None = None) -> torch.Tensor:
     """Eq. 7's constraint: sum_j weights[j] * mean over source j's observations of
     KL(pi_i_old(.|o_j) || pi_i(.|o_j)). ``kl_per_obs`` is (S, B)."""
-    return (weights * kl_per_obs.mean(-1)).sum()
+    return (weights * source_mean(kl_per_obs, active)).sum()
 
 
-def update_factor(factor: torch.Tensor, logp_new_own: torch.Tensor, logp_old_own: torch.Tensor) -> torch.Tensor:
+def update_factor(factor: torch.Tensor, logp_new_own: torch.Tensor, logp_old_own: torch.Tensor,
+                  active_own: torch.Tensor | None = None) -> torch.Tensor:
     """rho of Eq. 6-8: after a learner is updated, multiply by its own-seat ratio
-    pi_new(a|o) / pi_old(a|o) on its own samples (the product over the seats it controls)."""
-    return factor * torch.exp((logp_new_own - logp_old_own).sum(0))
+    pi_new(a|o) / pi_old(a|o) on its own samples (the product over the seats it controls).
+    A seat that did not act on a sample sent no action, so its ratio there is 1."""
+    log_ratio = logp_new_own - logp_old_own
+    if active_own is not None:
+        log_ratio = torch.where(active_own, log_ratio, 0.0)
+    return factor * torch.exp(log_ratio.sum(0))
 
 
 def value_loss(value: torch.Tensor, value_old: torch.Tensor, target: torch.Tensor, clip: float,

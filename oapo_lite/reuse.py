@@ -56,6 +56,21 @@ def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | 
     return m
 
 
+REUSE_KINDS = ("oapo", "own", "uniform")
+
+
+def matrix_for(kind: str, kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | None = None) -> np.ndarray:
+    """The reuse matrix of an algorithm family (Fig. 2): "oapo" Eq. 9 from ``kl``, "own" HAPPO's
+    identity, "uniform" MAPPO's 1/n (the last two ignore ``kl``, ``sigma``, ``lam``, ``allowed``)."""
+    if kind == "oapo":
+        return oapo_matrix(kl, sigma, lam, allowed)
+    if kind == "own":
+        return happo_matrix(len(kl))
+    if kind == "uniform":
+        return mappo_matrix(len(kl))
+    raise ValueError(f"unknown reuse kind {kind!r}; choose from {list(REUSE_KINDS)}")
+
+
 def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
     """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations.
 

@@ -25,9 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from oapo_lite import reuse
-from oapo_lite.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, state_distribution
+from oapo_lite.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, log_softmax, softmax, state_distribution
 
-ALGOS = ("oappo", "oatrpo", "happo", "hatrpo", "mappo")
+# each algorithm's kind of reuse matrix (reuse.matrix_for)
+REUSE = {"oappo": "oapo", "oatrpo": "oapo", "happo": "own", "hatrpo": "own", "mappo": "uniform"}
+ALGOS = tuple(REUSE)
 TRUST_REGION = ("oatrpo", "hatrpo")
 
 
@@ -95,15 +97,6 @@ class Batch:
     adv: np.ndarray
 
 
-def log_softmax(logits: np.ndarray) -> np.ndarray:
-    shifted = logits - logits.max(-1, keepdims=True)
-    return shifted - np.log(np.exp(shifted).sum(-1, keepdims=True))
-
-
-def softmax(logits: np.ndarray) -> np.ndarray:
-    return np.exp(log_softmax(logits))
-
-
 # ----------------------------------------------------------------------------- batches
 
 def exact_batch(game: DecPOMDP, pis: np.ndarray) -> Batch:
@@ -111,10 +104,6 @@ def exact_batch(game: DecPOMDP, pis: np.ndarray) -> Batch:
     weight = state_distribution(game, pis, normalised=True)[:, None] * joint_policy(game, pis)
     state, action = np.nonzero((weight > 0) & ~game.terminal[:, None])
     return Batch(state, action, weight[state, action], evaluate(game, pis).A[state, action])
-
-
-def _draw(probs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    return np.minimum((probs.cumsum(1) < rng.random((len(probs), 1))).sum(1), probs.shape[1] - 1)
 
 
 def sample_batch(game: DecPOMDP, pis: np.ndarray, n_episodes: int, horizon: int,
@@ -126,14 +115,15 @@ def sample_batch(game: DecPOMDP, pis: np.ndarray, n_episodes: int, horizon: int,
     the every-visit Monte-Carlo return average of this batch (a tabular critic).
     """
     pi = joint_policy(game, pis)
-    state = _draw(np.broadcast_to(game.rho0, (n_episodes, game.n_states)), rng)
+    draw = reuse.sample_mapping  # one categorical draw per row
+    state = draw(np.broadcast_to(game.rho0, (n_episodes, game.n_states)), rng)
     steps = []
     alive = ~game.terminal[state]
     for _ in range(horizon):
         if not alive.any():
             break
-        action = _draw(pi[state], rng)
-        nxt = _draw(game.P[state, action], rng)
+        action = draw(pi[state], rng)
+        nxt = draw(game.P[state, action], rng)
         steps.append((state, action, game.R[state, action], nxt, alive))
         state, alive = nxt, alive & ~game.terminal[nxt]
     s, a, r, s1, live = (np.stack(x) for x in zip(*steps))  # (T, n_episodes)
@@ -239,15 +229,6 @@ def kl_between_agents(tables: np.ndarray, eta: np.ndarray) -> np.ndarray:
     return np.array([[kl_max(tables[j], tables[i], eta[j]) for j in range(n)] for i in range(n)])
 
 
-def reuse_matrix(cfg: TabularConfig, kl: np.ndarray) -> np.ndarray:
-    n = len(kl)
-    if cfg.algo in ("happo", "hatrpo"):
-        return reuse.happo_matrix(n)
-    if cfg.algo == "mappo":
-        return reuse.mappo_matrix(n)
-    return reuse.oapo_matrix(kl, cfg.sigma, cfg.lam)
-
-
 def seat_map_distribution(m: np.ndarray) -> dict:
     """omega(e) = prod_m M[m, e_m]: row m of M read as Eq. 9's p(e_m), the learner playing seat m."""
     n = len(m)
@@ -274,7 +255,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
         std = np.sqrt(batch.weight @ (batch.adv - mean) ** 2 / batch.weight.sum())
         adv = (batch.adv - mean) / (std + 1e-8)
         kl = kl_between_agents(old, eta)
-        m = reuse_matrix(cfg, kl)
+        m = reuse.matrix_for(REUSE[cfg.algo], kl, cfg.sigma, cfg.lam)
         mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse == "sample" else None
         rows = np.eye(n)[mapping] if mapping is not None else m
         order = np.zeros(1, dtype=np.int64) if shared else reuse.update_order(n, rng_order)

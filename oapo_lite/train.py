@@ -28,7 +28,8 @@ from oapo_lite.envs.core import VecMaze, make_vec
 from oapo_lite.envs.maps import load_maze
 from oapo_lite.envs.oracle import optimal_return
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.losses import gae, normalise, off_agent_objective, update_factor, value_loss, weighted_kl
+from oapo_lite.losses import (gae, normalise, off_agent_objective, source_mean, update_factor, value_loss,
+                              weighted_kl)
 from oapo_lite.nets import Actors, Critic, ValueNorm
 from oapo_lite.trpo import trpo_step
 
@@ -159,10 +160,11 @@ def allowed_mask(cfg: TrainConfig, env) -> np.ndarray | None:
 
 
 def check_reuse_spaces(env, pairs: np.ndarray) -> None:
-    """Reusing experience needs equal observation and action spaces (Section 4)."""
+    """Reusing experience needs equal observation and action spaces (Section 4). ``pairs[i, j]``:
+    learner i may train on agent j's experience (not necessarily symmetric)."""
     spaces = getattr(env, "spaces", None)
     for i, j in zip(*np.nonzero(pairs)):
-        if spaces is not None and i < j and spaces[i] != spaces[j]:
+        if spaces is not None and i != j and spaces[i] != spaces[j]:
             raise ValueError(
                 f"reuse between agents {env.agents[i]!r} and {env.agents[j]!r} needs equal spaces, got "
                 f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")
@@ -217,6 +219,9 @@ class Rollout:
     reward: torch.Tensor  # (T, N)
     terminated: torch.Tensor  # (T, N)
     truncated: torch.Tensor  # (T, N)
+    # (n, B) bool: the seat acted on the sample; None when every seat always did (the mazes),
+    # so the losses take the plain means there
+    active: torch.Tensor | None = None
     episode_returns: list = field(default_factory=list)
 
 
@@ -237,6 +242,7 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     final_state = np.empty((length, N, env.state_dim), np.float32)
     reward = np.empty((length, N), np.float32)
     term, trunc = np.empty((length, N), bool), np.empty((length, N), bool)
+    active = np.empty((length, N, n), bool)
     act = (torch.empty((length, n, N, env.n_actions)) if continuous
            else torch.empty((length, n, N), dtype=torch.long))
     logp = torch.empty((length, n, N))
@@ -244,7 +250,7 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     with torch.inference_mode():
         weights = actors.stack(owner)
     for t in range(length):
-        obs[t], avail[t], state[t] = step.obs, step.avail, step.state
+        obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
         tic = time.perf_counter()
         with torch.inference_mode():
             act[t], logp[t] = sample_actions(actors, weights, step, gen)
@@ -257,7 +263,8 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     state[length] = step.state
     batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
                     *(torch.from_numpy(_per_agent(x.numpy(), 1)) for x in (act, logp)),
-                    *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)), returns)
+                    *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
+                    None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns)
     return batch, step
 
 
@@ -272,13 +279,23 @@ class Sources:
     w: torch.Tensor  # (R,) reuse weights W[net, rows]
     act: torch.Tensor  # (R, B)
     logp_old: torch.Tensor  # (R, B) behaviour log-probs pi_j_old(a_j | o_j)
+    kl_w: torch.Tensor  # (R,) trust-region weights (Eq. 7's W[net, rows], own seats never 0)
+    active: torch.Tensor | None = None  # (R, B) the source acted on the sample; None: always
 
     @classmethod
     def of(cls, net: int, W: np.ndarray, owner: list[int], batch: Rollout) -> "Sources":
         own = [k for k in range(len(owner)) if owner[k] == net]
         rows = sorted(set(np.flatnonzero(W[net] > 0).tolist()) | set(own))
-        return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(W[net][rows], dtype=torch.float32),
-                   batch.act[rows], batch.logp[rows])
+        w = W[net][rows]
+        # Eq. 7 weights the KL by M, which bounds the acting policy's own-seat KL by
+        # delta / W[i, i]: nothing when W[i, i] = 0 ("sample" mode drew another source, or
+        # lam = 0), and then the policy that acts could move without limit. An own seat with
+        # weight 0 therefore enters the trust region with weight 1 (its KL <= delta); where the
+        # paper's weight is positive it is kept, so the weights mode is Eq. 7 as written.
+        kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
+        return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(w, dtype=torch.float32),
+                   batch.act[rows], batch.logp[rows], torch.as_tensor(kl_w, dtype=torch.float32),
+                   None if batch.active is None else batch.active[rows])
 
 
 def learner_dists(actors: Actors, inputs: Inputs, src: Sources, idx=slice(None)) -> torch.Tensor:
@@ -300,9 +317,12 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(adv.shape[0], cfg.n_minibatch, rng):
             d = learner_dists(actors, inputs, src, idx)
+            active = None if src.active is None else src.active[:, idx]
             obj = off_agent_objective(actors.head.log_prob(d, src.act[:, idx]), src.logp_old[:, idx], src.w,
-                                      factor[idx], adv[idx], cfg.clip)
-            loss = -(obj + cfg.entropy_coef * actors.head.entropy(d[src.own]).mean())
+                                      factor[idx], adv[idx], cfg.clip, active)
+            own_active = None if active is None else active[src.own].reshape(-1)
+            entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
+            loss = -(obj + cfg.entropy_coef * entropy)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
@@ -313,17 +333,18 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
 def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor, adv: torch.Tensor,
                 cfg: TrainConfig) -> tuple[float, float]:
     """OATRPO (Eq. 7): one trust-region step on the unclipped off-agent surrogate under the
-    W-weighted KL(pi_old || pi) on the sources' observations. Returns (surrogate, KL or NaN)."""
+    weighted KL(pi_old || pi) on the sources' observations (weights ``src.kl_w``).
+    Returns (surrogate, KL or NaN)."""
     head = actors.head
     with torch.no_grad():
         d_old = learner_dists(actors, inputs, src)
 
     def objective() -> torch.Tensor:
         d = learner_dists(actors, inputs, src)
-        return off_agent_objective(head.log_prob(d, src.act), src.logp_old, src.w, factor, adv, None)
+        return off_agent_objective(head.log_prob(d, src.act), src.logp_old, src.w, factor, adv, None, src.active)
 
     def kl() -> torch.Tensor:
-        return weighted_kl(head.kl(d_old, learner_dists(actors, inputs, src)), src.w)
+        return weighted_kl(head.kl(d_old, learner_dists(actors, inputs, src)), src.kl_w, src.active)
 
     accepted = trpo_step(actors.net_params(src.net), objective, kl, cfg.kl_threshold, cfg.cg_iters, cfg.cg_damping,
                          cfg.line_search_steps, cfg.backtrack, cfg.accept_ratio)
@@ -347,20 +368,27 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
 
 
-def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str) -> np.ndarray:
-    """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations: every net on every input
-    in one batched forward, then gathered to (learner seat, source seat, sample)."""
+def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str,
+                     active: torch.Tensor | None = None) -> np.ndarray:
+    """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations (those where j acted, if
+    ``active`` (n, B) is given): every net on every input in one batched forward, then
+    gathered to (learner seat, source seat, sample)."""
     k, (U, _) = actors.n_nets, inputs.obs.shape
     with torch.no_grad():
-        d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))
-    return actors.head.kl_matrix(d[owner][:, inputs.index], reduce)
+        d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))[owner][:, inputs.index]
+    if active is None:
+        return actors.head.kl_matrix(d, reduce)
+    # where source j did not act, every learner is given j's own distribution: KL exactly 0
+    # there, which leaves a max unchanged; a mean is rescaled to the active samples below
+    seat, B = torch.arange(active.shape[0]), active.shape[1]
+    d = torch.where(active[None, :, :, None], d, d[seat, seat][None])
+    K = actors.head.kl_matrix(d, reduce)
+    return K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy()
 
 
 def reuse_matrix(spec: AlgoSpec, K: np.ndarray, cfg: TrainConfig, allowed: np.ndarray | None) -> np.ndarray:
     """M[i, j] = P(learner i trains on seat j's experience): Eq. 9, identity or uniform (Fig. 2)."""
-    if spec.reuse == "oapo":
-        return reuse.oapo_matrix(K, cfg.sigma, cfg.lam, allowed)
-    return reuse.happo_matrix(len(K)) if spec.reuse == "own" else reuse.mappo_matrix(len(K))
+    return reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
 
 
 def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
@@ -381,7 +409,8 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, own
         if spec.sequential:
             with torch.no_grad():
                 d_new = learner_dists(actors, batch.inputs, src)[src.own]
-                factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own])
+                factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
+                                       None if src.active is None else src.active[src.own])
     return factor, objectives, trpo_kls
 
 
@@ -431,12 +460,26 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     return torch.load(Path(out_dir) / "checkpoint.pt", weights_only=False)
 
 
-def _check_resumable(cfg: TrainConfig, saved: dict) -> None:
-    now = cfg.flat()
+def _check_resumable(cfg: TrainConfig, ck: dict) -> None:
+    """A checkpoint can continue ``cfg`` if it has every current field and only ``steps``
+    differs, and grows."""
+    now, saved = cfg.flat(), ck["config"]
+    missing = [k for k in now if k not in saved]
+    if missing:
+        raise ValueError(f"checkpoint has no config fields {missing} (written by an older oapo_lite); "
+                         "use another out_dir or resume=False")
     differ = [k for k in now if k != "steps" and str(now[k]) != str(saved[k])]
     if differ:
         raise ValueError(f"checkpoint was written by a different config (fields {differ}); "
                          "use another out_dir or resume=False")
+    stale = [f.name for f in dataclasses.fields(ck["step"]) if not hasattr(ck["step"], f.name)]
+    if stale:
+        raise ValueError(f"checkpoint's environment step has no fields {stale} (written by an older oapo_lite); "
+                         "use another out_dir or resume=False")
+    if ck["iteration"] > cfg.n_iterations:
+        raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
+                         f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}, "
+                         "or use another out_dir or resume=False")
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
@@ -457,7 +500,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
 
 
 def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
-    from tqdm.auto import tqdm
+    from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
     out.mkdir(parents=True, exist_ok=True)
     spec = ALGOS[cfg.algo]
@@ -488,19 +531,27 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
     rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
     start, history, rows = 0, [], []
     step = env.reset()
+    config_cols, revision = cfg.flat(), git_revision()
     if resume and (out / "checkpoint.pt").exists():
         ck = load_checkpoint(out)
-        _check_resumable(cfg, ck["config"])
-        for obj, key in ((actors, "actors"), (critic, "critic"), (value_norm, "value_norm"),
-                         (critic_opt, "critic_opt"), *zip(actor_opts, [f"actor_opt{k}" for k in range(n_nets)])):
-            obj.load_state_dict(ck[key])
-        act_gen.set_state(ck["act_gen"])
-        torch.set_rng_state(ck["torch_rng"])
-        rng.bit_generator.state = ck["np_rng"]
-        env.set_state(ck["env"])
-        start, step, history, rows = ck["iteration"], ck["step"], ck["history"], ck["rows"]
-
-    config_cols, revision = cfg.flat(), git_revision()
+        try:
+            _check_resumable(cfg, ck)
+            for obj, key in ((actors, "actors"), (critic, "critic"), (value_norm, "value_norm"),
+                             (critic_opt, "critic_opt"), *zip(actor_opts, [f"actor_opt{k}" for k in range(n_nets)])):
+                obj.load_state_dict(ck[key])
+            act_gen.set_state(ck["act_gen"])
+            torch.set_rng_state(ck["torch_rng"])
+            rng.bit_generator.state = ck["np_rng"]
+            env.set_state(ck["env"])
+            start, step, history = ck["iteration"], ck["step"], ck["history"]
+            # a run extended to more steps has no row where the shorter budget ended off the
+            # evaluation grid (evaluating draws no shared randomness, so dropping it changes
+            # nothing else), and its rows carry the new config
+            rows = [{**r, **config_cols} for r in ck["rows"]
+                    if r["iteration"] % cfg.eval_every == 0 or r["iteration"] == cfg.n_iterations]
+        except KeyError as err:
+            raise ValueError(f"checkpoint {out / 'checkpoint.pt'} has no entry {err} (written by an older "
+                             "oapo_lite); use another out_dir or resume=False") from None
     clock = {"env": 0.0, "policy": 0.0, "learn": 0.0, "eval": 0.0}
     batch_size = cfg.n_envs * cfg.rollout_len
 
@@ -520,7 +571,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         batch, step = collect(env, step, actors, owner, cfg.rollout_len, act_gen, clock)
         tic = time.perf_counter()
         adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
-        K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce)
+        K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
         M = reuse_matrix(spec, K, cfg, allowed)
         W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
         W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat

@@ -1,13 +1,15 @@
 """Objectives and distributions of the neural track against independent computations."""
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
 
 from oapo_lite import reuse
-from oapo_lite.losses import gae, normalise, off_agent_objective, update_factor, value_loss, weighted_kl
+from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
 from oapo_lite.nets import Actors, Categorical, Gaussian, ValueNorm
+from oapo_lite.train import TrainConfig, advantages
 
 torch.set_num_threads(1)
 
@@ -38,6 +40,36 @@ def test_gae_with_lambda_one_is_the_monte_carlo_return_minus_value():
     got = gae(reward, value, next_value, done, 0.5, 1.0)
     returns = torch.tensor([[1 + 0.5 * 0 + 0.25 * 2], [0 + 0.5 * 2], [2.0]])
     torch.testing.assert_close(got, returns - value)
+
+
+@pytest.mark.parametrize("bootstrap, env0", [
+    # env 0 is truncated at t = 1; its V(final state) = 10 continues the return only with bootstrap
+    (True, [1.8 + 0.72 * 7.0, 7.0, 2.6]),
+    (False, [1.8 + 0.72 * -2.0, -2.0, 2.6]),
+])
+def test_advantages_of_a_hand_computed_three_step_rollout(bootstrap, env0):
+    """gamma 0.9, lambda 0.8 (gamma lambda = 0.72); V(s) is the state's first entry.
+    env 0: values 1, 2, 3, 4; rewards 1, 0, 2; truncated at t = 1 (V(final) = 10):
+      delta_2 = 2 + 0.9 * 4 - 3 = 2.6; delta_1 = 0 + 0.9 * 10 - 2 = 7 (or -2 without bootstrap);
+      delta_0 = 1 + 0.9 * 2 - 1 = 1.8; the recursion stops at t = 1.
+    env 1: values 0.5, 1.5, 2.5, 3.5; rewards 0, 1, 1; terminated at t = 0 (next value 0 either way):
+      A_0 = -0.5; delta_2 = 1 + 0.9 * 3.5 - 2.5 = 1.65; A_1 = 1 + 0.9 * 2.5 - 1.5 + 0.72 * 1.65."""
+    value = torch.tensor([[1.0, 0.5], [2.0, 1.5], [3.0, 2.5], [4.0, 3.5]])
+    batch = SimpleNamespace(
+        state=value[..., None],
+        final_state=torch.tensor([[7.0, 7.0], [10.0, 7.0], [7.0, 7.0]])[..., None],  # 7: never read
+        reward=torch.tensor([[1.0, 0.0], [0.0, 1.0], [2.0, 1.0]]),
+        terminated=torch.tensor([[False, True], [False, False], [False, False]]),
+        truncated=torch.tensor([[False, False], [True, False], [False, False]]))
+    def critic(state):
+        return state[..., 0]
+
+    identity = SimpleNamespace(denormalize=lambda x: x)
+    adv, returns, v_old = advantages(critic, identity, batch, TrainConfig(gamma=0.9, gae_lambda=0.8), bootstrap)
+    expected = torch.tensor([[env0[0], -0.5], [env0[1], 1.75 + 0.72 * 1.65], [env0[2], 1.65]])
+    torch.testing.assert_close(returns - value[:-1].reshape(-1), expected.reshape(-1))
+    torch.testing.assert_close(adv, normalise(expected.reshape(-1)))
+    torch.testing.assert_close(v_old, value[:-1].reshape(-1))
 
 
 def _sources(seed=0, S=3, B=50):
@@ -98,6 +130,24 @@ def test_factor_is_the_product_of_own_seat_ratios():
 def test_weighted_kl_mixes_per_source_means():
     kl = torch.tensor([[1.0, 3.0], [10.0, 30.0]])
     assert weighted_kl(kl, torch.tensor([0.25, 0.75])).item() == pytest.approx(0.25 * 2 + 0.75 * 20)
+
+
+def test_inactive_samples_contribute_nothing_to_objective_kl_and_factor():
+    """With an ``active`` mask, each source's mean runs over its active samples only: the
+    same numbers as dropping the inactive samples; a factor ignores an inactive seat's ratio."""
+    logp_new, logp_old, w, factor, adv = _sources(4)
+    active = torch.rand(logp_new.shape, generator=torch.Generator().manual_seed(0)) < 0.6
+    active[2] = False  # a source that never acted adds nothing
+    got = off_agent_objective(logp_new, logp_old, w, factor, adv, 0.2, active)
+    expected = sum(w[j] * off_agent_objective(logp_new[j, active[j]][None], logp_old[j, active[j]][None],
+                                              torch.ones(1), factor[active[j]], adv[active[j]], 0.2)
+                   for j in range(2))
+    torch.testing.assert_close(got, expected)
+    kl = torch.rand(logp_new.shape, generator=torch.Generator().manual_seed(1))
+    torch.testing.assert_close(weighted_kl(kl, w, active), sum(w[j] * kl[j, active[j]].mean() for j in range(2)))
+    assert torch.equal(source_mean(kl, None), kl.mean(-1))  # no mask: the plain mean, bit for bit
+    torch.testing.assert_close(update_factor(factor, logp_new[:1].detach(), logp_old[:1], active[:1]),
+                               factor * torch.where(active[0], torch.exp(logp_new[0].detach() - logp_old[0]), 1.0))
 
 
 def test_clipped_value_loss_takes_the_worse_of_raw_and_clipped():

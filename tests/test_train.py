@@ -1,4 +1,6 @@
 """The training loop: algorithm identities, learning, determinism, resume, and the PettingZoo path."""
+import copy
+import dataclasses
 import json
 import math
 
@@ -12,8 +14,9 @@ from pettingzoo import ParallelEnv
 from oapo_lite import __main__ as cli
 from oapo_lite.envs import MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.nets import Actors
-from oapo_lite.train import ALGOS, Sources, TrainConfig, collect, learner_dists, load_checkpoint, train, update_actors
+from oapo_lite.nets import Actors, Categorical
+from oapo_lite.train import (ALGOS, Inputs, Rollout, Sources, TrainConfig, check_reuse_spaces, collect, learner_dists,
+                             load_checkpoint, policy_distances, train, update_actors)
 
 torch.set_num_threads(1)
 
@@ -39,6 +42,13 @@ def _params(tmp_path, name) -> dict:
 
 def _same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def _assert_same_run(tmp_path, a: str, rows_a: pd.DataFrame, b: str, rows_b: pd.DataFrame) -> None:
+    """The same rows, returned and on disk, and the same final parameters."""
+    pd.testing.assert_frame_equal(rows_a, rows_b)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / a / "results.csv"), pd.read_csv(tmp_path / b / "results.csv"))
+    assert _same(_params(tmp_path, a), _params(tmp_path, b))
 
 
 @pytest.mark.parametrize("bad, words", [
@@ -95,14 +105,40 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path, algo):
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path / "resumed", progress=False, callback=crash)
     assert load_checkpoint(tmp_path / "resumed")["iteration"] == 4
-    resumed = train(cfg, tmp_path / "resumed", progress=False)
-    pd.testing.assert_frame_equal(full, resumed)
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "full" / "results.csv"),
-                                  pd.read_csv(tmp_path / "resumed" / "results.csv"))
-    assert _same(_params(tmp_path, "full"), _params(tmp_path, "resumed"))
+    _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
     with pytest.raises(ValueError, match="different config"):
         train(TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, **{**TINY, "lam": 0.5}),
               tmp_path / "full", progress=False)
+
+
+def test_resuming_with_more_steps_gives_the_rows_of_the_longer_run(tmp_path):
+    """5 iterations end off the evaluation grid (every 2); extended to 10 the run must not keep
+    that row, and must equal a run of 10 from the start."""
+    short = TrainConfig(algo="oappo", steps=160 * 5, **TINY)
+    long = dataclasses.replace(short, steps=160 * 10)
+    assert list(train(short, tmp_path / "run", progress=False)["iteration"]) == [0, 2, 4, 5]
+    extended = train(long, tmp_path / "run", progress=False)
+    full = train(long, tmp_path / "full", progress=False)
+    assert list(extended["iteration"]) == [0, 2, 4, 6, 8, 10]
+    _assert_same_run(tmp_path, "full", full, "run", extended)
+    with pytest.raises(ValueError, match=r"past steps = 800 \(5 iterations\); resuming needs steps >= 1600"):
+        train(short, tmp_path / "run", progress=False)
+
+
+@pytest.mark.parametrize("damage, words", [
+    (lambda ck: ck["config"].pop("kl_reduce"), "no config fields ['kl_reduce']"),
+    (lambda ck: ck.pop("critic_opt"), "no entry 'critic_opt'"),
+    (lambda ck: delattr(ck["step"], "active"), "environment step has no fields ['active']"),
+])
+def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, damage, words):
+    cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
+    train(cfg, tmp_path, progress=False)
+    ck = load_checkpoint(tmp_path)
+    damage(ck)
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    with pytest.raises(ValueError) as err:
+        train(dataclasses.replace(cfg, steps=160 * 3), tmp_path, progress=False)
+    assert words in str(err.value) and "resume=False" in str(err.value)
 
 
 def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
@@ -168,7 +204,7 @@ def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
     explicit = torch.ones_like(factor)
     with torch.no_grad():
         for k in range(3):
-            src = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]])
+            src = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
             logp_new = actors.head.log_prob(learner_dists(actors, batch.inputs, src)[0], batch.act[k])
             explicit *= torch.exp(logp_new) / torch.exp(batch.logp[k])
     assert not torch.allclose(factor, torch.ones_like(factor))  # the agents did move
@@ -181,6 +217,68 @@ def test_every_accepted_trpo_step_stays_within_delta(tmp_path):
     kls = [k for h in history for k in h["trpo_kls"] if not math.isnan(k)]
     assert len(kls) >= len(history)  # most learner steps are accepted
     assert max(kls) <= 0.005
+
+
+def _random_batch(actors: Actors, n: int, B: int, seed: int, obs_dim: int = 4, n_actions: int = 3) -> Rollout:
+    """Seat k observes N(3k, 1) vectors, so every seat's observations are its own; actions
+    drawn from the seat's policy. Only what the learner updates read is filled in."""
+    g = torch.Generator().manual_seed(seed)
+    obs = torch.randn(n, B, obs_dim, generator=g) + 3.0 * torch.arange(n)[:, None, None]
+    avail = torch.ones(n, B, n_actions, dtype=torch.bool)
+    with torch.no_grad():
+        d = actors(obs, range(n), avail)
+    act = Categorical.sample(d, g)
+    return Rollout(Inputs.of(obs.numpy(), avail.numpy()), act, Categorical.log_prob(d, act), *[None] * 5)
+
+
+def test_sample_mode_oatrpo_keeps_the_acting_policy_within_delta_on_its_own_observations():
+    """Each learner drew the other's experience (W one-hot off the diagonal): the surrogate is
+    on the other's samples, yet the KL on the learner's own observations stays <= delta."""
+    delta = 0.01
+    actors = Actors(2, 4, 3, (16,), False, torch.Generator().manual_seed(0))
+    with torch.no_grad():  # policies far from uniform: their natural-gradient steps are not tiny
+        for k in range(2):
+            actors.weights[k][2].mul_(100.0)
+    batch = _random_batch(actors, 2, 64, seed=1)
+    old = copy.deepcopy(actors)
+    W = np.array([[0.0, 1.0], [1.0, 0.0]])
+    adv = torch.randn(64, generator=torch.Generator().manual_seed(2))
+    _, _, kls = update_actors(actors, [], batch, W, [0, 1], [0, 1], adv, ALGOS["oatrpo"],
+                              TrainConfig(algo="oatrpo", kl_threshold=delta), np.random.default_rng(0))
+    assert not any(math.isnan(k) for k in kls)  # both steps were taken
+    with torch.no_grad():
+        for k in range(2):
+            own = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
+            kl = Categorical.kl(learner_dists(old, batch.inputs, own), learner_dists(actors, batch.inputs, own))
+            assert 1e-4 < kl.mean().item() <= delta * (1 + 1e-5)
+    # the weights mode keeps Eq. 7's M-weighted KL as written
+    src = Sources.of(0, np.array([[0.7, 0.3], [0.3, 0.7]]), [0, 1], batch)
+    assert torch.equal(src.kl_w, src.w)
+    torch.testing.assert_close(Sources.of(0, W, [0, 1], batch).kl_w, torch.ones(2))
+
+
+@pytest.mark.parametrize("reduce", ["max", "mean"])
+def test_policy_distances_are_kl_of_the_source_from_the_learner_on_the_source_observations(reduce):
+    """K[i, j] = reduce over agent j's (active) observations of KL(pi_j || pi_i), pair by pair."""
+    actors = Actors(3, 4, 3, (16,), False, torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        for k in range(3):
+            actors.weights[k][2].mul_(30.0)
+    batch = _random_batch(actors, 3, 20, seed=1)
+    obs = batch.inputs.obs[batch.inputs.index]  # (seat, sample, obs_dim)
+    avail = torch.ones(20, 3, dtype=torch.bool)
+    active = torch.rand(3, 20, generator=torch.Generator().manual_seed(2)) < 0.5
+    for mask in (None, active):
+        K = policy_distances(actors, batch.inputs, [0, 1, 2], reduce, mask)
+        with torch.no_grad():
+            for i in range(3):
+                for j in range(3):
+                    on = slice(None) if mask is None else mask[j]
+                    source, learner = (actors(obs[j][None], [k], avail[None])[0] for k in (j, i))
+                    kl = Categorical.kl(source, learner)[on]
+                    expected = kl.max() if reduce == "max" else kl.mean()
+                    assert K[i, j] == pytest.approx(expected.item(), rel=1e-4, abs=1e-7)
+        assert abs(K[0, 1] - K[1, 0]) > 1e-3  # not symmetric: the orientation is tested
 
 
 def test_results_csv_holds_every_config_field_and_the_revision(tmp_path):
@@ -232,13 +330,15 @@ def test_training_through_pettingzoo_matches_training_on_vecmaze(tmp_path):
 
 
 class Toy(ParallelEnv):
-    """Two agents with chosen spaces; reward = agent a's first action dimension, 5 steps."""
+    """Two agents with chosen spaces; reward = agent a's first action dimension, 5 steps
+    (agent b's episode may end earlier)."""
 
     metadata = {"name": "toy_v0"}
 
-    def __init__(self, obs_dims=(3, 3), continuous=False, masked=None):
+    def __init__(self, obs_dims=(3, 3), continuous=False, masked=None, leave=None):
         self.possible_agents = ["a", "b"]
         self.continuous, self.masked = continuous, masked
+        self.leave = leave  # agent b terminates after this many steps, a plays on
         obs = {k: spaces.Box(-1, 1, (d,), np.float32) for k, d in zip(self.possible_agents, obs_dims)}
         if masked == "obs":
             obs = {k: spaces.Dict({"observation": o, "action_mask": spaces.MultiBinary(4)}) for k, o in obs.items()}
@@ -278,10 +378,9 @@ class Toy(ParallelEnv):
         done = self.t >= 5
         agents = self.agents
         obs = self._observe()
-        if done:
-            self.agents = []
-        return (obs, {k: r for k in agents}, {k: done for k in agents}, {k: False for k in agents},
-                self._infos(agents))
+        ended = {k: done or (k == "b" and self.t == self.leave) for k in agents}
+        self.agents = [k for k in agents if not ended[k]]
+        return obs, {k: r for k in agents}, ended, {k: False for k in agents}, self._infos(agents)
 
 
 def test_reuse_between_agents_with_different_spaces_raises(tmp_path):
@@ -312,3 +411,56 @@ def test_continuous_actions_through_pettingzoo(tmp_path):
         rows = _run(tmp_path, f"box_{algo}", algo=algo, env_fn=lambda: Toy(continuous=True), n_envs=4,
                     rollout_len=10, steps=400, eval_episodes=4, eval_every=1)
         assert np.isfinite(rows["eval_return"]).all()
+
+
+def test_reuse_in_one_direction_between_different_spaces_raises():
+    env = PettingZooVec(lambda: Toy(obs_dims=(3, 5)), n_envs=1)
+    for one_way in ([[1, 0], [1, 1]], [[1, 1], [0, 1]]):  # b learns from a; a learns from b
+        with pytest.raises(ValueError, match="needs equal spaces"):
+            check_reuse_spaces(env, np.array(one_way, bool))
+    check_reuse_spaces(env, np.eye(2, dtype=bool))  # own experience only
+
+
+def test_an_agent_that_leaves_early_is_inactive_until_the_episode_resets():
+    vec = PettingZooVec(lambda: Toy(leave=2), n_envs=1)
+    steps = [vec.reset()] + [vec.step(np.zeros((1, 2), int)) for _ in range(6)]
+    np.testing.assert_array_equal([s.active[0] for s in steps],
+                                  [[1, 1], [1, 1], [1, 0], [1, 0], [1, 0], [1, 1], [1, 1]])  # reset after 5
+    assert (steps[3].obs[0, 1] == 0).all() and (steps[3].obs[0, 0] != 0).all()
+    assert make_vec(CORRIDOR, 3).reset().active.all()
+
+
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo"])
+def test_samples_of_an_agent_that_left_change_neither_k_nor_any_update(tmp_path, algo):
+    """Seat b's samples after it left the episode are replaced by other observations, actions
+    and behaviour probabilities: K and every learner's update stay the same. Read as active
+    (no mask), the same replacement does change them, so the check can fail."""
+    env = PettingZooVec(lambda: Toy(leave=2), n_envs=4, seed=0)
+    actors = Actors(2, env.obs_dim, env.n_actions, (16,), False, torch.Generator().manual_seed(0))
+    gen = torch.Generator().manual_seed(1)
+    batch, _ = collect(env, env.reset(), actors, [0, 1], 10, gen, {"env": 0.0, "policy": 0.0})
+    gone = ~batch.active
+    assert gone[1].any() and not gone[0].any()
+    inputs = dataclasses.replace(batch.inputs, index=torch.where(gone, batch.inputs.index[[0, 0]], batch.inputs.index))
+    other = dataclasses.replace(batch, inputs=inputs, act=torch.where(gone, (batch.act + 1) % 4, batch.act),
+                                logp=torch.where(gone, batch.logp - 1.0, batch.logp))
+    adv = torch.randn(batch.act.shape[1], generator=gen)
+    cfg = TrainConfig(algo=algo)
+
+    def update(b: Rollout):
+        net = copy.deepcopy(actors)
+        opts = [] if ALGOS[algo].trust_region else [torch.optim.Adam(net.net_params(k), lr=cfg.lr) for k in range(2)]
+        K = policy_distances(net, b.inputs, [0, 1], "mean", b.active)
+        update_actors(net, opts, b, np.full((2, 2), 0.5), [0, 1], [1, 0], adv, ALGOS[algo], cfg,
+                      np.random.default_rng(0))
+        return K, net.state_dict()
+
+    (K, params), (K_other, params_other) = update(batch), update(other)
+    np.testing.assert_allclose(K, K_other, rtol=1e-6)
+    for key in params:
+        torch.testing.assert_close(params[key], params_other[key])
+    (K, params), (K_other, params_other) = (update(dataclasses.replace(b, active=None)) for b in (batch, other))
+    assert not np.allclose(K, K_other) and not _same(params, params_other)
+    rows = _run(tmp_path, algo, algo=algo, env_fn=lambda: Toy(leave=2), n_envs=2, rollout_len=10, steps=40,
+                eval_episodes=2)
+    assert np.isfinite(rows["eval_return"]).all()

@@ -132,3 +132,15 @@ def test_a_rejected_line_search_leaves_the_parameters_unchanged():
                     backtrack=0.8, accept_ratio=1e6)
     assert math.isnan(got)
     assert torch.equal(parameters_to_vector(params), before)
+
+
+def test_the_full_step_reaches_the_kl_threshold():
+    """For a small delta the KL is quadratic along the step, so sqrt(2 delta / s^T F s) s lands
+    on KL ~ delta (a little below: damping adds to F) and the line search takes it at once
+    (a backtracked step, 0.5x, would have KL ~ delta / 4; a mis-scaled one would miss)."""
+    delta = 1e-5
+    for seed in range(8):
+        params, objective, kl = _toy_problem(seed)
+        got = trpo_step(params, objective, kl, delta, cg_iters=10, damping=1e-3, line_search_steps=10,
+                        backtrack=0.5, accept_ratio=0.5)
+        assert 0.85 * delta <= got <= delta, (seed, got / delta)

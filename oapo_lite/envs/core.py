@@ -31,6 +31,7 @@ class VecStep:
     final_state: np.ndarray  # like state, before auto-reset: bootstrap on truncation from here
     episode_return: np.ndarray  # (N,) float32 undiscounted return of the episode that ended, NaN elsewhere
     episode_success: np.ndarray  # (N,) float32 1.0 / 0.0 for an ended episode, NaN elsewhere
+    active: np.ndarray  # (N, n_agents) bool: the seat acts on ``obs`` (on the maze always)
 
 
 def as_maze(maze: Maze | str) -> Maze:
@@ -85,10 +86,13 @@ class VecMaze:
         no = np.zeros(self.n_envs, dtype=bool)
         nan = np.full(self.n_envs, np.nan, dtype=np.float32)
         return VecStep(obs, state, self._avail(), np.zeros(self.n_envs, dtype=np.float32), no, no.copy(),
-                       obs.copy(), state.copy(), nan, nan.copy())
+                       obs.copy(), state.copy(), nan, nan.copy(), self._active())
 
     def _avail(self) -> np.ndarray:
         return np.ones((self.n_envs, self.n_agents, N_ACTIONS), dtype=bool)
+
+    def _active(self) -> np.ndarray:
+        return np.ones((self.n_envs, self.n_agents), dtype=bool)
 
     def _check_actions(self, actions) -> np.ndarray:
         a = np.asarray(actions)
@@ -127,7 +131,7 @@ class VecMaze:
         obs[done] = self._start_obs
         state[done] = self._start_state
         return VecStep(obs, state, self._avail(), reward.astype(np.float32), terminated, truncated,
-                       final_obs, final_state, episode_return, episode_success)
+                       final_obs, final_state, episode_return, episode_success, self._active())
 
     def get_state(self) -> dict[str, np.ndarray]:
         """Everything the dynamics carry between steps, as copies (for checkpoints)."""

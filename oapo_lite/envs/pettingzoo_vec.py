@@ -4,6 +4,8 @@ The generic path: ``n_envs`` copies stepped one after another (environments we d
 cannot be vectorised for them). Agents come in ``possible_agents`` order; the team reward
 of a step is the mean of the agents' rewards; observations of agents whose spaces are
 smaller are zero-padded, and so are discrete action sets (padded actions are unavailable).
+Agents that have left ``env.agents`` before the episode ends are marked inactive
+(``VecStep.active``): they get no action, and training ignores their samples.
 """
 from __future__ import annotations
 
@@ -81,8 +83,9 @@ class PettingZooVec:
         except (NotImplementedError, AttributeError):
             return None
 
-    def _view(self, env, obs: dict, infos: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(obs (n, obs_dim), avail (n, A), state) of one copy; absent agents read as zeros."""
+    def _view(self, env, obs: dict, infos: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(obs (n, obs_dim), avail (n, A), state, active (n,)) of one copy; agents without an
+        observation read as zeros, and agents no longer in ``env.agents`` are inactive."""
         o = np.zeros((self.n_agents, self.obs_dim), dtype=np.float32)
         avail = np.ones((self.n_agents, self.n_actions), dtype=bool)
         for k, agent in enumerate(self.agents):
@@ -94,23 +97,26 @@ class PettingZooVec:
             mask = mask if mask is not None else infos.get(agent, {}).get("action_mask")
             if mask is not None and not self.continuous:
                 avail[k, : len(mask)] = np.asarray(mask, dtype=bool)
-        raw = [_flat_obs(obs[a], _obs_size(s))[0] if a in obs else np.zeros(_obs_size(s), np.float32)
-               for a, (s, _) in zip(self.agents, self.spaces)]
-        state = self._try_state(env) if self._has_state else np.concatenate(raw)
-        return o, avail, state
+        state = self._try_state(env) if self._has_state else self._concat_obs(obs)
+        return o, avail, state, np.array([a in env.agents for a in self.agents])
 
-    def _reset_copy(self, k: int, seed: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _concat_obs(self, obs: dict) -> np.ndarray:
+        """The global state of an environment without ``state()``: every agent's raw observation."""
+        return np.concatenate([_flat_obs(obs[a], _obs_size(s))[0] if a in obs else np.zeros(_obs_size(s), np.float32)
+                               for a, (s, _) in zip(self.agents, self.spaces)])
+
+    def _reset_copy(self, k: int, seed: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         obs, infos = self.envs[k].reset(seed=seed)
         self._t[k], self._returns[k] = 0, 0.0
         return self._view(self.envs[k], obs, infos)
 
     def reset(self) -> VecStep:
         views = [self._reset_copy(k, self.seed + k) for k in range(self.n_envs)]
-        obs, avail, state = (np.stack(v) for v in zip(*views))
+        obs, avail, state, active = (np.stack(v) for v in zip(*views))
         no = np.zeros(self.n_envs, dtype=bool)
         nan = np.full(self.n_envs, np.nan, dtype=np.float32)
         return VecStep(obs, state, avail, np.zeros(self.n_envs, np.float32), no, no.copy(), obs.copy(),
-                       state.copy(), nan, nan.copy())
+                       state.copy(), nan, nan.copy(), active)
 
     def _env_action(self, k: int, a):
         space = self.spaces[k][1]
@@ -119,7 +125,7 @@ class PettingZooVec:
     def step(self, actions) -> VecStep:
         """``actions`` (N, n) ints, or (N, n, D) floats for Box spaces."""
         N = self.n_envs
-        out = {key: [] for key in ("obs", "avail", "state", "final_obs", "final_state")}
+        out = {key: [] for key in ("obs", "avail", "state", "active", "final_obs", "final_state")}
         reward = np.zeros(N, np.float32)
         terminated, truncated = np.zeros(N, bool), np.zeros(N, bool)
         ep_return, ep_success = np.full(N, np.nan, np.float32), np.full(N, np.nan, np.float32)
@@ -142,13 +148,13 @@ class PettingZooVec:
                 now = self._reset_copy(e, None)
             else:
                 now = final
-            for key, value in zip(("obs", "avail", "state"), now):
+            for key, value in zip(("obs", "avail", "state", "active"), now):
                 out[key].append(value)
             out["final_obs"].append(final[0])
             out["final_state"].append(final[2])
         o = {key: np.stack(v) for key, v in out.items()}
         return VecStep(o["obs"], o["state"], o["avail"], reward, terminated, truncated, o["final_obs"],
-                       o["final_state"], ep_return, ep_success)
+                       o["final_state"], ep_return, ep_success, o["active"])
 
     def get_state(self) -> dict:
         """Deep copies of the environment copies and the episode counters (for checkpoints)."""
