@@ -27,7 +27,7 @@ REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -> pd.DataFrame:
     """One row per run: steps to threshold (censored), whether it got there, final fraction."""
     rows = []
-    for (label, seed), run in df.sort_values("step").groupby(["label", "seed"], sort=False):
+    for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run["frac_opt"] >= threshold, "step"]
         k = max(1, int(round(tail * len(run))))
         rows.append({
@@ -136,43 +136,38 @@ def _fmt_final(s, label) -> str:
     return f"{label} {s.loc[label, 'final_mean']:.3f} +- {s.loc[label, 'final_std']:.3f}"
 
 
-# The claims of Section 6.1, one function per figure.
+# The claims of Section 6.1, as data: (test, the curves it compares, the paper's claim).
+CLAIMS = {
+    "fig3b": [
+        (stuck, ("mappo",), "MAPPO (shared parameters) stays below the optimum"),
+        (faster, ("oappo", "happo"), "OAPPO converges faster than HAPPO"),
+        (faster, ("oatrpo", "happo"), "OATRPO converges faster than HAPPO"),
+        (higher, ("oappo", "mappo"), "OAPPO ends above MAPPO"),
+        (higher, ("oatrpo", "mappo"), "OATRPO ends above MAPPO"),
+        (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO"),
+    ],
+    "fig3c": [
+        (better, (0.1, 0.01), "sigma = 0.1 beats sigma = 0.01 (own experience only is slower)"),
+        (better, (0.1, 1.0), "sigma = 0.1 beats sigma = 1 (irrelevant experience confuses)"),
+        (better, (0.1, 10.0), "sigma = 0.1 beats sigma = 10 (all peers' experience hinders)"),
+    ],
+    "fig3d": [
+        (better, (0.7, 0.4), "lambda = 0.7 is marginally better than lambda = 0.4"),
+        (better, (0.4, 1.0), "lambda = 0.4 beats lambda = 1 (own experience only)"),
+        (better, (0.4, 0.2), "lambda = 0.4 beats lambda = 0.2 (mostly others' experience)"),
+    ],
+    "fig5b": [
+        (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
+        (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
+        (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
+        (optimal, ("NR",), "NR (no reuse) reaches the optimum"),
+    ],
+}
 
-def claims_fig3b(df: pd.DataFrame) -> list[Verdict]:
+
+def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
+    """Check every claim the paper makes about ``figure`` against that figure's data."""
+    if figure not in CLAIMS:
+        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted(CLAIMS)}")
     s = summary(df)
-    return [
-        stuck(s, "mappo", "MAPPO (shared parameters) stays below the optimum"),
-        faster(s, "oappo", "happo", "OAPPO converges faster than HAPPO"),
-        faster(s, "oatrpo", "happo", "OATRPO converges faster than HAPPO"),
-        higher(s, "oappo", "mappo", "OAPPO ends above MAPPO"),
-        higher(s, "oatrpo", "mappo", "OATRPO ends above MAPPO"),
-        faster(s, "oatrpo", "oappo", "OATRPO converges faster than OAPPO"),
-    ]
-
-
-def claims_fig3c(df: pd.DataFrame) -> list[Verdict]:
-    s = summary(df)
-    return [
-        better(s, 0.1, 0.01, "sigma = 0.1 beats sigma = 0.01 (own experience only is slower)"),
-        better(s, 0.1, 1.0, "sigma = 0.1 beats sigma = 1 (irrelevant experience confuses)"),
-        better(s, 0.1, 10.0, "sigma = 0.1 beats sigma = 10 (all peers' experience hinders)"),
-    ]
-
-
-def claims_fig3d(df: pd.DataFrame) -> list[Verdict]:
-    s = summary(df)
-    return [
-        better(s, 0.7, 0.4, "lambda = 0.7 is marginally better than lambda = 0.4"),
-        better(s, 0.4, 1.0, "lambda = 0.4 beats lambda = 1 (own experience only)"),
-        better(s, 0.4, 0.2, "lambda = 0.4 beats lambda = 0.2 (mostly others' experience)"),
-    ]
-
-
-def claims_fig5b(df: pd.DataFrame) -> list[Verdict]:
-    s = summary(df)
-    return [
-        stuck(s, "UR", "UR (red and black share) gets stuck below the optimum"),
-        stuck(s, "AR", "AR (everyone shares) gets stuck below the optimum"),
-        optimal(s, "RR", "RR (black and blue share) reaches the optimum"),
-        optimal(s, "NR", "NR (no reuse) reaches the optimum"),
-    ]
+    return [test(s, *labels, claim) for test, labels, claim in CLAIMS[figure]]

@@ -61,13 +61,13 @@ def test_stuck_and_optimal():
 def test_figure_claims_follow_the_data():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
                    "oatrpo": (30_000, 1.0)})
-    assert all(x.held for x in v.claims_fig3b(good))
+    assert all(x.held for x in v.claims("fig3b", good))
     bad = curves({"mappo": (20_000, 1.0), "happo": (30_000, 1.0), "oappo": (50_000, 1.0),
                   "oatrpo": (90_000, 1.0)})
-    held = {x.claim: x.held for x in v.claims_fig3b(bad)}
+    held = {x.claim: x.held for x in v.claims("fig3b", bad)}
     assert not held["MAPPO (shared parameters) stays below the optimum"]
     assert not held["OATRPO converges faster than OAPPO"]
-    sentence = v.claims_fig3b(bad)[0].sentence()
+    sentence = v.claims("fig3b", bad)[0].sentence()
     assert "not reproduced" in sentence and "mappo 1.000" in sentence
 
 
@@ -85,3 +85,8 @@ def test_censored_seeds_never_make_a_run_faster():
     s = v.summary(pd.concat([a, a_stuck, b]))
     assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
     assert v.faster(s, "a", "b", "a faster").status == v.NOT
+
+
+def test_unknown_figure_raises():
+    with pytest.raises(ValueError, match="fig9"):
+        v.claims("fig9", curves({"a": (1, 1.0)}))
