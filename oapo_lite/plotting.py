@@ -56,20 +56,21 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
     """Fig. 1 (right): other agents placed at their KL distance from the learner.
 
     Inside the circle of radius sigma their experience is reused (red); outside it is
-    omitted (blue). The radial axis is log-scaled so that both 0.001 and 10 fit.
+    omitted (blue). The radial axis is log-scaled (three decades below sigma up to the
+    farthest peer) so that both 0.0001 and 10 fit.
     """
     if not 0 < sigma < np.inf:
         raise ValueError(f"sigma must be a positive finite threshold to draw a circle, got {sigma!r}")
     ax = ax or plt.subplots(figsize=(4.5, 4.5))[1]
-    floor = sigma / 100
+    floor = sigma / 1000
     radius = lambda d: np.log10(max(d, floor) / floor)  # noqa: E731 -- local scale only
     r_sigma = radius(sigma)
-    outer = max(r_sigma * 1.6, max(radius(d) for d in kl_row) * 1.1)
+    outer = 1.35 * max(r_sigma, max(radius(d) for d in kl_row))
     ax.add_patch(plt.Circle((0, 0), r_sigma, color="tab:red", alpha=0.12))
     ax.add_patch(plt.Circle((0, 0), outer, color="tab:blue", alpha=0.06, zorder=0))
     ax.add_patch(plt.Circle((0, 0), r_sigma, fill=False, color="tab:red", lw=1.5))
     ax.plot(0, 0, "k*", ms=14)
-    ax.annotate(f"{names[learner]} (learner)", (0, 0), xytext=(6, 8), textcoords="offset points")
+    ax.annotate(f"{names[learner]} (learner)", (0, 0), xytext=(-8, -4), textcoords="offset points", ha="right", va="top")
     others = [j for j in range(len(names)) if j != learner]
     for k, j in enumerate(others):
         angle = 2 * np.pi * (k + 0.5) / len(others)
@@ -78,7 +79,7 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
         ax.plot(r * np.cos(angle), r * np.sin(angle), "o", ms=10,
                 color="tab:red" if inside else "tab:blue")
         ax.annotate(f"{names[j]}\nKL={kl_row[j]:.3g}", (r * np.cos(angle), r * np.sin(angle)),
-                    xytext=(8, -4), textcoords="offset points")
+                    xytext=(10, 0), textcoords="offset points", va="center")
     ax.set_xlim(-outer, outer)
     ax.set_ylim(-outer, outer)
     ax.set_aspect("equal")

@@ -128,3 +128,12 @@ def test_scheme_mask_names_missing_types_and_mapping_checks_rows():
         reuse.scheme_mask("UR", ("red_0", "black_1", "blue_2"))
     with pytest.raises(ValueError, match="sum to 1"):
         reuse.sample_mapping(np.array([[0.5, 0.2], [0.0, 1.0]]), np.random.default_rng(0))
+
+
+def test_matrix_for_dispatches_and_rejects_unknown_kinds():
+    kl = random_kl(3, 7)
+    assert np.array_equal(reuse.matrix_for("oapo", kl, 0.2, 0.6), reuse.oapo_matrix(kl, 0.2, 0.6))
+    assert np.array_equal(reuse.matrix_for("own", kl, 0.2, 0.6), np.eye(3))
+    assert np.allclose(reuse.matrix_for("uniform", kl, 0.2, 0.6), 1 / 3)
+    with pytest.raises(ValueError, match="unknown reuse kind 'shared'"):
+        reuse.matrix_for("shared", kl, 0.2, 0.6)
