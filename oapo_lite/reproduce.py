@@ -34,9 +34,9 @@ def run_notebooks(budget: str, inplace: bool) -> list[tuple[str, float]]:
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
-    timings = []
-    for i, path in enumerate(notebook_paths(), 1):
-        print(f"[{i}/{len(notebook_paths())}] {path.name} (budget={budget})", flush=True)
+    timings, paths = [], notebook_paths()
+    for i, path in enumerate(paths, 1):
+        print(f"[{i}/{len(paths)}] {path.name} (budget={budget})", flush=True)
         params = {"budget": budget} if takes_budget(path) else {}
         start = time.perf_counter()
         pm.execute_notebook(
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, seconds in timings:
         print(f"  {name:<45s} {seconds:6.1f} s")
     print(f"  total wall time: {time.perf_counter() - start:.1f} s")
-    print(f"  figures: {experiments.figures_dir(args.budget).relative_to(ROOT)}/")
+    print(f"  figures: {experiments.figures_dir(args.budget)}/")
     return 0
 
 
