@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.train import TrainConfig, atomic_write, train
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -101,11 +101,7 @@ def run_path(cfg: TrainConfig, budget: str) -> Path:
 
 
 def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
-    """Write next to the target, then rename: a reader sees the old file or the whole new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{os.getpid()}")
-    df.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    atomic_write(lambda p: df.to_csv(p, index=False), path)
 
 
 def _run_one(cfg: TrainConfig, budget: str) -> str:

@@ -386,11 +386,6 @@ def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: s
     return K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy()
 
 
-def reuse_matrix(spec: AlgoSpec, K: np.ndarray, cfg: TrainConfig, allowed: np.ndarray | None) -> np.ndarray:
-    """M[i, j] = P(learner i trains on seat j's experience): Eq. 9, identity or uniform (Fig. 2)."""
-    return reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
-
-
 def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
                   adv: torch.Tensor, spec: AlgoSpec, cfg: TrainConfig, rng: np.random.Generator):
     """Algorithm 1 lines 7-9: update the learners one after another in ``order``, learner i on
@@ -449,7 +444,9 @@ def _mean_or_nan(x) -> float:
     return float(x[~np.isnan(x)].mean()) if (~np.isnan(x)).any() else math.nan
 
 
-def _atomic(write: Callable[[str], None], path: Path) -> None:
+def atomic_write(write: Callable[[str], None], path: Path) -> None:
+    """``write(tmp)`` next to ``path``, then rename: a reader sees the old file or the whole new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     write(str(tmp))
     os.replace(tmp, path)
@@ -561,7 +558,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         ret, success = evaluate(actors, owner, eval_env, gen, cfg.max_steps)
         rows.append({**config_cols, "git_rev": revision, "iteration": it, "step": it * batch_size,
                      "eval_return": ret, "frac_opt": ret / optimum, "eval_success": success, **metrics})
-        _atomic(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
+        atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
         clock["eval"] += time.perf_counter() - tic
 
     if start == 0:
@@ -572,7 +569,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         tic = time.perf_counter()
         adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
         K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
-        M = reuse_matrix(spec, K, cfg, allowed)
+        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
         W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
         W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
         order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
@@ -598,7 +595,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                   "act_gen": act_gen.get_state(), "torch_rng": torch.get_rng_state(),
                   "np_rng": rng.bit_generator.state, "env": env.get_state(), "step": step,
                   "history": history, "rows": rows}
-            _atomic(lambda p: torch.save(ck, p), out / "checkpoint.pt")
+            atomic_write(lambda p: torch.save(ck, p), out / "checkpoint.pt")
         if callback is not None:
             callback(history[-1])
 
