@@ -92,7 +92,13 @@ FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")
 
 
 def run_id(cfg: TrainConfig) -> str:
-    blob = json.dumps(cfg.flat(), sort_keys=True, default=str)
+    """Name of a run's cached result: the algorithm, env and seed, and a hash of the fields that
+    differ from ``TrainConfig``'s defaults. Hashing only those keeps every cached run valid when
+    a new field is added with a default that reproduces the old behaviour; changing an existing
+    default, on the other hand, must come with a new cache (delete ``runs/``)."""
+    defaults = TrainConfig().flat()
+    changed = {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
+    blob = json.dumps(changed, sort_keys=True, default=str)
     return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
