@@ -61,7 +61,7 @@ def train_main(argv: list[str]) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    run_dir = out / f"{cfg.algo}_{name}_s{cfg.seed}"
+    run_dir = out / f"{cfg.algo}_{name.replace(':', '-')}_s{cfg.seed}"
     start = time.perf_counter()
     rows = train(cfg, run_dir, resume=resume, progress=progress)
     wall = time.perf_counter() - start

@@ -24,8 +24,8 @@ import pandas as pd
 import torch
 
 from oapo_lite import reuse
-from oapo_lite.envs.core import VecMaze, make_vec
-from oapo_lite.envs.maps import load_maze
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.core import VecMaze
 from oapo_lite.envs.oracle import optimal_return
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
 from oapo_lite.losses import (gae, normalise, off_agent_objective, source_mean, update_factor, value_loss,
@@ -102,7 +102,7 @@ class TrainConfig:
 
         need(self.algo in ALGOS, "algo", str(sorted(ALGOS)))
         if self.env_fn is None:
-            load_maze(self.env)  # raises MapError naming the built-in maps
+            env_registry.check(self.env)  # raises naming the built-in maps or the engine's names
         self.hidden = tuple(self.hidden)
         need(len(self.hidden) > 0 and all(int(h) == h and h > 0 for h in self.hidden), "hidden", "positive ints")
         for name in ("steps", "n_envs", "rollout_len", "ppo_epochs", "n_minibatch", "cg_iters",
@@ -148,7 +148,7 @@ class TrainConfig:
 def make_env(cfg: TrainConfig, n_envs: int, seed: int):
     if cfg.env_fn is not None:
         return PettingZooVec(cfg.env_fn, n_envs, seed=seed, max_steps=cfg.max_steps)
-    return make_vec(cfg.env, n_envs, cfg.max_steps)
+    return env_registry.make_vec(cfg.env, n_envs, seed, cfg.max_steps)
 
 
 def allowed_mask(cfg: TrainConfig, env) -> np.ndarray | None:

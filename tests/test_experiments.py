@@ -22,3 +22,10 @@ def test_every_paper_run_has_its_own_id():
 def test_an_unknown_budget_names_the_known_ones():
     with pytest.raises(ValueError, match="unknown budget 'huge'.*paper"):
         experiments.get_budget("huge")
+
+
+def test_env_names_with_an_unknown_engine_or_map_raise_naming_what_exists():
+    with pytest.raises(ValueError, match="unknown engine 'nosuch'"):
+        TrainConfig(env="nosuch:map")
+    with pytest.raises(ValueError, match="black_red"):
+        TrainConfig(env="no_such_maze")

@@ -1,0 +1,45 @@
+"""Environment names: a built-in maze, a map text, or ``<engine>:<name>`` for a real engine.
+
+An engine is a module with ``check(name)`` (raise ``ValueError`` naming the allowed names;
+cheap, without importing the engine itself) and ``make_vec(name, n_envs, seed, max_steps)``
+(a vector env with the ``VecStep`` interface of ``core.VecMaze``). Engines are imported only
+when used, so a user without, say, JAX still trains on the mazes.
+"""
+from __future__ import annotations
+
+import importlib
+
+from .core import make_vec as make_maze_vec
+from .maps import load_maze
+
+ENGINES: dict[str, str] = {}  # prefix -> module path
+
+
+def split(spec: str) -> tuple[str | None, str]:
+    """``"smax:3m"`` -> ("smax", "3m"); a maze name or map text -> (None, spec)."""
+    prefix, sep, name = spec.partition(":")
+    if sep and "\n" not in spec:  # a map text has several lines (and an "agents:" header)
+        if prefix not in ENGINES:
+            raise ValueError(f"unknown engine {prefix!r} in env {spec!r}; engines are {sorted(ENGINES)}")
+        return prefix, name
+    return None, spec
+
+
+def _engine(prefix: str):
+    return importlib.import_module(ENGINES[prefix])
+
+
+def check(spec: str) -> None:
+    """Raise a clear error for an env name that does not exist."""
+    prefix, name = split(spec)
+    if prefix is None:
+        load_maze(name)  # MapError names the built-in maps
+    else:
+        _engine(prefix).check(name)
+
+
+def make_vec(spec: str, n_envs: int, seed: int, max_steps: int):
+    prefix, name = split(spec)
+    if prefix is None:
+        return make_maze_vec(name, n_envs, max_steps)
+    return _engine(prefix).make_vec(name, n_envs, seed, max_steps)
