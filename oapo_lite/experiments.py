@@ -34,6 +34,7 @@ class Budget:
 BUDGETS = {
     "smoke": Budget(seeds=(0,), steps=3_200, eval_every=1, eval_episodes=8),
     "paper": Budget(seeds=(0, 1, 2, 3, 4), steps=240_000, eval_every=2, eval_episodes=32),
+    "paper20": Budget(seeds=tuple(range(20)), steps=240_000, eval_every=2, eval_episodes=32),
 }
 
 

@@ -6,11 +6,28 @@ as a fraction of the oracle optimum). A run is one (label, seed).
 
 Two numbers summarise a run: the env steps it took to first reach ``threshold`` of the
 optimum (censored at its last step if it never did), and its final fraction of the optimum
-(mean over the last ``tail`` share of its evaluation points). A comparison "A beats B"
-is *reproduced* when the means differ in the claimed direction by more than twice the
-combined standard error over seeds (std with ddof = 1), *direction only* when they differ in
-that direction by less, and *not reproduced* otherwise. "Faster" also needs at least as many
-seeds to have reached the threshold: a censored seed never counts in a run's favour.
+(mean over the last ``tail`` share of its evaluation points).
+
+Interval estimates, as in rliable (Agarwal et al., NeurIPS 2021): the interquartile mean
+(IQM, the mean of the middle 50% of runs) of each number over seeds, the probability of
+improvement P(a better than b) = P(X_a > X_b) + P(X_a = X_b) / 2 for one run drawn from
+each curve (the Mann-Whitney U statistic over n_a n_b), and 95% percentile bootstrap
+confidence intervals in which every curve's runs are resampled on their own (the stratified
+bootstrap with one stratum per curve). With one seed there is no interval (NaN).
+
+The decision rule (``status``) reads the intervals:
+
+* a pairwise claim "a beats b" is *reproduced* when the whole 95% interval of P(a better
+  than b) lies above 0.5, *direction only* when its point estimate does, *not reproduced*
+  otherwise;
+* "a stays below the threshold" (``stuck``) is reproduced when the whole interval of a's
+  final IQM lies below it, direction only when the IQM does; "a reaches it" (``optimal``)
+  when the whole interval lies at or above it, direction only when the IQM does.
+
+"Faster" also needs at least as many seeds to have reached the threshold: a censored seed
+never counts in a run's favour. The former rule is kept as ``se_status``: a difference of
+means in the claimed direction larger than twice the combined standard error over seeds
+(std with ddof = 1) is reproduced, a smaller one direction only.
 """
 from __future__ import annotations
 
@@ -18,10 +35,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
+CONFIDENCE = 0.95
+N_RESAMPLES = 10_000
+SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
+METRICS = {"steps": "steps_to_threshold", "final": "final_frac"}
 
 
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -> pd.DataFrame:
@@ -40,11 +62,9 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -
     return pd.DataFrame(rows)
 
 
-def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
-    """Per label: mean and std over seeds of steps-to-threshold and final fraction."""
-    runs = per_run(df, threshold)
+def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
-    out = pd.DataFrame({
+    return pd.DataFrame({
         "seeds": g.size(),
         "reached": g["reached"].sum().astype(int),
         "steps_mean": g["steps_to_threshold"].mean(),
@@ -52,21 +72,121 @@ def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
         "final_mean": g["final_frac"].mean(),
         "final_std": g["final_frac"].std(ddof=1).fillna(0.0),
     })
-    return out
 
+
+def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
+    """Per label: mean and std over seeds of steps-to-threshold and final fraction."""
+    return _summary_of(per_run(df, threshold))
+
+
+# --- interval estimates -------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate and its bootstrap confidence interval (NaN bounds: no interval)."""
+
+    point: float
+    low: float
+    high: float
+
+    def fmt(self, spec: str = ".3f") -> str:
+        if np.isnan(self.low):
+            return f"{self.point:{spec}} [no interval: 1 seed]"
+        return f"{self.point:{spec}} [{self.low:{spec}}, {self.high:{spec}}]"
+
+
+def iqm(x, axis: int = -1):
+    """Interquartile mean: the mean after cutting 25% of the values at each end (rliable's IQM).
+
+    ``scipy.stats.trim_mean`` cuts ``int(0.25 n)`` values per side, so with 5 seeds it is the
+    mean of the middle three.
+    """
+    return stats.trim_mean(x, 0.25, axis=axis)
+
+
+def probability_of_improvement(x, y, axis: int = -1):
+    """P(X > Y) + P(X = Y) / 2 for X drawn from ``x`` and Y from ``y``: the Mann-Whitney U
+    statistic of x over y divided by n_x n_y (rliable's probability of improvement, one task)."""
+    x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)[..., :, None]
+    y = np.moveaxis(np.asarray(y, dtype=float), axis, -1)[..., None, :]
+    return ((x > y) + 0.5 * (x == y)).mean(axis=(-2, -1))
+
+
+def bootstrap_interval(statistic, *samples, confidence: float = CONFIDENCE,
+                       n_resamples: int = N_RESAMPLES, seed: int = SEED) -> Interval:
+    """``statistic(*samples)`` with its percentile bootstrap interval.
+
+    Each sample is one stratum, resampled with replacement on its own (a curve's runs are
+    never mixed with another curve's): rliable's stratified bootstrap with one task.
+    ``statistic`` must take an ``axis`` keyword (it is evaluated on all resamples at once).
+    """
+    if not 0 < confidence < 1:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
+    samples = [np.asarray(s, dtype=float) for s in samples]
+    point = float(statistic(*samples, axis=-1))
+    if min(len(s) for s in samples) < 2:
+        return Interval(point, np.nan, np.nan)
+    ci = stats.bootstrap(samples, statistic, n_resamples=n_resamples, confidence_level=confidence,
+                         method="percentile", vectorized=True, rng=np.random.default_rng(seed)).confidence_interval
+    return Interval(point, float(ci.low), float(ci.high))
+
+
+class Evidence:
+    """One figure's runs and the per-curve numbers every verdict reads."""
+
+    def __init__(self, df: pd.DataFrame, threshold: float = THRESHOLD):
+        self.threshold = threshold
+        self.runs = per_run(df, threshold)
+        self.summary = _summary_of(self.runs)
+
+    def values(self, label, metric: str) -> np.ndarray:
+        """Per-seed values of ``metric`` ("steps" or "final") for one curve."""
+        if metric not in METRICS:
+            raise ValueError(f"unknown metric {metric!r}; choose from {sorted(METRICS)}")
+        if label not in self.summary.index:
+            raise ValueError(f"no runs labelled {label!r}; labels are {list(self.summary.index)}")
+        return self.runs.loc[self.runs["label"] == label, METRICS[metric]].to_numpy(float)
+
+    def level(self, label, metric: str) -> Interval:
+        """IQM over seeds of ``metric`` with its 95% interval."""
+        return bootstrap_interval(iqm, self.values(label, metric))
+
+    def improvement(self, a, b, metric: str) -> Interval:
+        """P(a better than b) on ``metric`` with its 95% interval; fewer steps is better."""
+        sign = -1.0 if metric == "steps" else 1.0
+        return bootstrap_interval(probability_of_improvement, sign * self.values(a, metric),
+                                  sign * self.values(b, metric))
+
+
+def intervals(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
+    """Per label: IQM over seeds of steps-to-threshold and final fraction, with 95% intervals."""
+    ev = Evidence(df, threshold)
+    rows = {}
+    for label in ev.summary.index:
+        row = {"seeds": ev.summary.loc[label, "seeds"], "reached": ev.summary.loc[label, "reached"]}
+        for metric in METRICS:
+            est = ev.level(label, metric)
+            row |= {f"{metric}_iqm": est.point, f"{metric}_low": est.low, f"{metric}_high": est.high}
+        rows[label] = row
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("label")
+
+
+# --- verdicts -------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Verdict:
     claim: str
-    status: str
+    status: str  # the interval rule (module docstring)
+    se_status: str  # the former two-standard-error rule, kept for comparison
     evidence: str
+    estimate: str  # the interval the status reads, e.g. "P(oappo better) 0.720 [0.400, 0.960]"
 
     @property
     def held(self) -> bool:
         return self.status == REPRODUCED
 
     def sentence(self) -> str:
-        return f"{self.claim}: {self.status}. {self.evidence}"
+        return f"{self.claim}: {self.status} (two-standard-error rule: {self.se_status}). {self.evidence}"
 
 
 def _stderr(s: pd.DataFrame, label, col: str) -> float:
@@ -75,65 +195,94 @@ def _stderr(s: pd.DataFrame, label, col: str) -> float:
     return float(s.loc[label, f"{col}_std"]) / np.sqrt(seeds) if seeds > 1 else np.inf
 
 
-NOISE_SE = 2.0  # a difference must exceed this many combined standard errors
+NOISE_SE = 2.0  # the former rule: a difference must exceed this many combined standard errors
 
 
-def _status(diff: float, noise: float) -> str:
+def _se_status(diff: float, noise: float) -> str:
     if diff > NOISE_SE * noise:
         return REPRODUCED
     return DIRECTION if diff > 0 else NOT
 
 
-def faster(s: pd.DataFrame, a, b, claim: str) -> Verdict:
+def _above(est: Interval, value: float) -> str:
+    """Interval rule for "the estimate exceeds ``value``" (NaN bounds never decide)."""
+    if est.low > value:
+        return REPRODUCED
+    return DIRECTION if est.point > value else NOT
+
+
+def _pairwise(ev: Evidence, a, b, metric: str, claim: str, se_diff: float, se_noise: float,
+              evidence: str, veto: bool = False) -> Verdict:
+    p = ev.improvement(a, b, metric)
+    word = "faster" if metric == "steps" else "higher"
+    return Verdict(claim, NOT if veto else _above(p, 0.5), NOT if veto else _se_status(se_diff, se_noise),
+                   f"{evidence}; P({a} {word}) = {p.fmt()}.", f"P({a} {word}) {p.fmt()}")
+
+
+def faster(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` reaches the threshold in fewer env steps than ``b``."""
-    diff = s.loc[b, "steps_mean"] - s.loc[a, "steps_mean"]
-    noise = np.hypot(_stderr(s, a, "steps"), _stderr(s, b, "steps"))
-    status = NOT if s.loc[a, "reached"] < s.loc[b, "reached"] else _status(diff, noise)
-    return Verdict(claim, status, f"steps to {THRESHOLD:.0%} of the optimum: "
-                   f"{_fmt_steps(s, a)} vs {_fmt_steps(s, b)}.")
+    s = ev.summary
+    return _pairwise(ev, a, b, "steps", claim,
+                     se_diff=s.loc[b, "steps_mean"] - s.loc[a, "steps_mean"],
+                     se_noise=np.hypot(_stderr(s, a, "steps"), _stderr(s, b, "steps")),
+                     evidence=f"steps to {ev.threshold:.0%} of the optimum, IQM [95% CI] over seeds: "
+                              f"{_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}",
+                     veto=s.loc[a, "reached"] < s.loc[b, "reached"])
 
 
-def higher(s: pd.DataFrame, a, b, claim: str) -> Verdict:
+def higher(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` ends at a higher fraction of the optimum than ``b``."""
-    diff = s.loc[a, "final_mean"] - s.loc[b, "final_mean"]
-    noise = np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final"))
-    return Verdict(claim, _status(diff, noise),
-                   f"final fraction of the optimum: {_fmt_final(s, a)} vs {_fmt_final(s, b)}.")
+    s = ev.summary
+    return _pairwise(ev, a, b, "final", claim,
+                     se_diff=s.loc[a, "final_mean"] - s.loc[b, "final_mean"],
+                     se_noise=np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final")),
+                     evidence=f"final fraction of the optimum, IQM [95% CI]: {_fmt_final(ev, a)} vs {_fmt_final(ev, b)}")
 
 
-def better(s: pd.DataFrame, a, b, claim: str) -> Verdict:
+def better(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` is better than ``b``: higher at the end or, where both end within
-    ``FINAL_TIE`` of each other, faster to the threshold."""
-    by_final = higher(s, a, b, claim)
-    if abs(s.loc[a, "final_mean"] - s.loc[b, "final_mean"]) > FINAL_TIE:
-        return by_final
-    by_speed = faster(s, a, b, claim)
-    return Verdict(claim, by_speed.status, f"{by_final.evidence[:-1]}; {by_speed.evidence}")
+    ``FINAL_TIE`` of each other, faster to the threshold. The interval rule compares the final
+    IQMs to decide which, the former rule the final means."""
+    by_final, by_speed = higher(ev, a, b, claim), faster(ev, a, b, claim)
+    tie_iqm = abs(ev.level(a, "final").point - ev.level(b, "final").point) <= FINAL_TIE
+    tie_mean = abs(ev.summary.loc[a, "final_mean"] - ev.summary.loc[b, "final_mean"]) <= FINAL_TIE
+    chosen = by_speed if tie_iqm else by_final
+    evidence = by_final.evidence if not (tie_iqm or tie_mean) else f"{by_final.evidence[:-1]}; {by_speed.evidence}"
+    return Verdict(claim, chosen.status, (by_speed if tie_mean else by_final).se_status, evidence, chosen.estimate)
 
 
-def stuck(s: pd.DataFrame, a, claim: str, threshold: float = THRESHOLD) -> Verdict:
-    """Claim: ``a`` stays below ``threshold`` of the optimum (a local optimum)."""
-    gap = threshold - s.loc[a, "final_mean"]
-    return Verdict(claim, _status(gap, _stderr(s, a, "final")),
-                   f"final fraction {_fmt_final(s, a)}; {s.loc[a, 'reached']} of "
-                   f"{s.loc[a, 'seeds']} seeds ever reached {threshold:.0%}.")
+def _single(ev: Evidence, a, claim: str, below: bool) -> Verdict:
+    s, thr = ev.summary, ev.threshold
+    est = ev.level(a, "final")
+    if below:  # "stuck": the whole interval below the threshold
+        status = REPRODUCED if est.high < thr else DIRECTION if est.point < thr else NOT
+        se = _se_status(thr - s.loc[a, "final_mean"], _stderr(s, a, "final"))
+    else:  # "optimal": the whole interval at or above it
+        status = REPRODUCED if est.low >= thr else DIRECTION if est.point >= thr else NOT
+        se = _se_status(s.loc[a, "final_mean"] - thr + 1e-12, _stderr(s, a, "final"))
+    return Verdict(claim, status, se,
+                   f"final fraction, IQM [95% CI]: {_fmt_final(ev, a)}; {s.loc[a, 'reached']} of "
+                   f"{s.loc[a, 'seeds']} seeds ever reached {thr:.0%}.", f"IQM final {est.fmt()}")
 
 
-def optimal(s: pd.DataFrame, a, claim: str, threshold: float = THRESHOLD) -> Verdict:
-    """Claim: ``a`` reaches ``threshold`` of the optimum and stays there."""
-    gap = s.loc[a, "final_mean"] - threshold
-    return Verdict(claim, _status(gap + 1e-12, _stderr(s, a, "final")),
-                   f"final fraction {_fmt_final(s, a)}; {s.loc[a, 'reached']} of "
-                   f"{s.loc[a, 'seeds']} seeds reached {threshold:.0%}.")
+def stuck(ev: Evidence, a, claim: str) -> Verdict:
+    """Claim: ``a`` stays below the threshold of the optimum (a local optimum)."""
+    return _single(ev, a, claim, below=True)
 
 
-def _fmt_steps(s, label) -> str:
-    return (f"{label} {s.loc[label, 'steps_mean']:,.0f} +- {s.loc[label, 'steps_std']:,.0f} "
-            f"({s.loc[label, 'reached']}/{s.loc[label, 'seeds']} seeds reached)")
+def optimal(ev: Evidence, a, claim: str) -> Verdict:
+    """Claim: ``a`` reaches the threshold of the optimum and stays there."""
+    return _single(ev, a, claim, below=False)
 
 
-def _fmt_final(s, label) -> str:
-    return f"{label} {s.loc[label, 'final_mean']:.3f} +- {s.loc[label, 'final_std']:.3f}"
+def _fmt_steps(ev: Evidence, label) -> str:
+    s = ev.summary
+    return (f"{label} {ev.level(label, 'steps').fmt(',.0f')} (mean {s.loc[label, 'steps_mean']:,.0f}; "
+            f"{s.loc[label, 'reached']}/{s.loc[label, 'seeds']} seeds reached)")
+
+
+def _fmt_final(ev: Evidence, label) -> str:
+    return f"{label} {ev.level(label, 'final').fmt()} (mean {ev.summary.loc[label, 'final_mean']:.3f})"
 
 
 # The claims of Section 6.1, as data: (test, the curves it compares, the paper's claim).
@@ -169,5 +318,12 @@ def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
     """Check every claim the paper makes about ``figure`` against that figure's data."""
     if figure not in CLAIMS:
         raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted(CLAIMS)}")
-    s = summary(df)
-    return [test(s, *labels, claim) for test, labels, claim in CLAIMS[figure]]
+    ev = Evidence(df)
+    return [test(ev, *labels, claim) for test, labels, claim in CLAIMS[figure]]
+
+
+def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:
+    """Tidy: one row per (budget, claim) with the interval the verdict reads and both rules' verdicts."""
+    return pd.DataFrame([{"budget": budget, "claim": v.claim, "estimate [95% CI]": v.estimate,
+                          "verdict": v.status, "2-SE rule": v.se_status}
+                         for budget, vs in verdicts_by_budget.items() for v in vs])

@@ -29,3 +29,13 @@ def test_env_names_with_an_unknown_engine_or_map_raise_naming_what_exists():
         TrainConfig(env="nosuch:map")
     with pytest.raises(ValueError, match="black_red"):
         TrainConfig(env="no_such_maze")
+
+
+def test_paper20_is_paper_with_twenty_seeds():
+    paper, paper20 = experiments.get_budget("paper"), experiments.get_budget("paper20")
+    assert paper20.seeds == tuple(range(20)) and paper20.seeds[:5] == paper.seeds
+    assert (paper20.steps, paper20.eval_every, paper20.eval_episodes) == (paper.steps, paper.eval_every, paper.eval_episodes)
+    # the first five seeds are the very runs of the paper budget (same ids)
+    for fig in experiments.FIGURES:
+        ids = {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper20")}
+        assert {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper")} <= ids

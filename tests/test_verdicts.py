@@ -1,7 +1,8 @@
-"""Verdicts are functions of the data: synthetic curves with a known answer."""
+"""Verdicts are functions of the data: synthetic curves and samples with a known answer."""
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from oapo_lite import verdicts as v
 
@@ -18,6 +19,84 @@ def curves(spec, seeds=5, steps=np.arange(0, 100_001, 5_000), noise=0.0):
     return pd.DataFrame(rows)
 
 
+def evidence(spec, **kw):
+    return v.Evidence(curves(spec, **kw))
+
+
+# --- the statistics against hand computations ---------------------------------------------
+
+def test_iqm_is_the_mean_of_the_middle_half():
+    assert v.iqm(np.array([7.0, 1, 100, 3, 5, 2, 4, 6])) == pytest.approx((3 + 4 + 5 + 6) / 4)
+    assert v.iqm(np.array([0.0, 10, 1, 2, 3])) == pytest.approx((1 + 2 + 3) / 3)  # 5 seeds: middle three
+    assert v.iqm(np.array([[1.0, 2, 3, 4], [10, 20, 30, 400]])).tolist() == pytest.approx([2.5, 25.0])
+
+
+def test_probability_of_improvement_known_cases():
+    low, high = np.arange(5.0), np.arange(5.0) + 10
+    assert v.probability_of_improvement(high, low) == 1.0  # dominating sample
+    assert v.probability_of_improvement(low, high) == 0.0
+    assert v.probability_of_improvement(low, low) == 0.5  # identical samples
+    # by hand: pairs (x, y) with x > y count 1, ties 1/2: 1 vs {0, 1, 2} -> 1 + .5 + 0; 3 vs it -> 3
+    assert v.probability_of_improvement([1.0, 3.0], [0.0, 1.0, 2.0]) == pytest.approx(4.5 / 6)
+
+
+def test_probability_of_improvement_is_the_mann_whitney_statistic():
+    rng = np.random.default_rng(1)
+    x, y = rng.integers(0, 6, 12).astype(float), rng.integers(0, 6, 9).astype(float)  # with ties
+    u = stats.mannwhitneyu(x, y, alternative="greater").statistic
+    assert v.probability_of_improvement(x, y) == pytest.approx(u / (len(x) * len(y)))
+
+
+def test_degenerate_samples_give_zero_width_intervals_at_the_true_value():
+    est = v.bootstrap_interval(v.iqm, np.full(5, 0.216))
+    assert (est.point, est.low, est.high) == pytest.approx((0.216, 0.216, 0.216))
+    p = v.bootstrap_interval(v.probability_of_improvement, np.full(5, 2.0), np.full(7, 1.0))
+    assert (p.point, p.low, p.high) == (1.0, 1.0, 1.0)
+    tie = v.bootstrap_interval(v.probability_of_improvement, np.full(5, 1.0), np.full(5, 1.0))
+    assert (tie.point, tie.low, tie.high) == (0.5, 0.5, 0.5)
+
+
+def test_dominating_sample_keeps_probability_one_under_resampling():
+    rng = np.random.default_rng(2)
+    p = v.bootstrap_interval(v.probability_of_improvement, rng.normal(10, 1, 5), rng.normal(0, 1, 5))
+    assert (p.point, p.low, p.high) == (1.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("statistic", [np.mean, v.iqm])
+def test_bootstrap_interval_covers_a_known_mean(statistic):
+    # N(1, 1): mean and IQM both estimate 1 (a symmetric distribution). 300 samples of 20,
+    # a 95% interval: the coverage should be near 0.95 (binomial sd 0.013; percentile
+    # intervals run a little short at n = 20).
+    rng = np.random.default_rng(3)
+    hits = [est.low <= 1.0 <= est.high for est in
+            (v.bootstrap_interval(statistic, rng.normal(1.0, 1.0, 20), n_resamples=2000, seed=i) for i in range(300))]
+    assert 0.89 <= np.mean(hits) <= 0.99
+
+
+def test_bootstrap_is_reproducible_and_seeded():
+    x = np.random.default_rng(4).normal(size=10)
+    assert v.bootstrap_interval(v.iqm, x) == v.bootstrap_interval(v.iqm, x)
+    assert v.bootstrap_interval(v.iqm, x, seed=1) != v.bootstrap_interval(v.iqm, x, seed=2)
+
+
+def test_one_run_has_no_interval():
+    est = v.bootstrap_interval(v.iqm, [0.5])
+    assert est.point == 0.5 and np.isnan(est.low) and np.isnan(est.high)
+    assert "no interval" in est.fmt()
+
+
+def test_bad_confidence_metric_and_label_raise():
+    with pytest.raises(ValueError, match="confidence must lie in"):
+        v.bootstrap_interval(v.iqm, [1.0, 2.0], confidence=95)
+    ev = evidence({"a": (10_000, 1.0)})
+    with pytest.raises(ValueError, match="unknown metric 'reward'"):
+        ev.values("a", "reward")
+    with pytest.raises(ValueError, match="no runs labelled 'b'"):
+        ev.values("b", "final")
+
+
+# --- per-run numbers and verdicts ---------------------------------------------------------
+
 def test_per_run_steps_and_censoring():
     df = curves({"a": (40_000, 1.0), "b": (40_000, 0.5)}, seeds=1)
     runs = v.per_run(df).set_index("label")
@@ -27,35 +106,55 @@ def test_per_run_steps_and_censoring():
     assert runs.loc["b", "final_frac"] == pytest.approx(0.5)
 
 
+def test_intervals_table_matches_per_run_values():
+    df = curves({"fast": (20_000, 1.0), "low": (20_000, 0.5)}, noise=0.05)
+    table = v.intervals(df)
+    runs = v.per_run(df)
+    fast = runs.loc[runs["label"] == "fast", "steps_to_threshold"]
+    assert table.loc["fast", "steps_iqm"] == pytest.approx(stats.trim_mean(fast, 0.25))
+    assert table.loc["low", ["final_iqm", "final_low", "final_high"]].tolist() == pytest.approx([0.5] * 3)
+    assert (table["steps_low"] <= table["steps_iqm"]).all() and (table["steps_iqm"] <= table["steps_high"]).all()
+
+
 def test_faster_and_higher_directions():
-    df = curves({"fast": (20_000, 1.0), "slow": (80_000, 1.0), "low": (20_000, 0.5)}, noise=0.05)
-    s = v.summary(df)
-    assert v.faster(s, "fast", "slow", "x").status == v.REPRODUCED
-    assert v.faster(s, "slow", "fast", "x").status == v.NOT
-    assert v.higher(s, "fast", "low", "x").status == v.REPRODUCED
-    assert v.higher(s, "low", "fast", "x").status == v.NOT
+    ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0), "low": (20_000, 0.5)}, noise=0.05)
+    for rule in ("status", "se_status"):
+        assert getattr(v.faster(ev, "fast", "slow", "x"), rule) == v.REPRODUCED
+        assert getattr(v.faster(ev, "slow", "fast", "x"), rule) == v.NOT
+        assert getattr(v.higher(ev, "fast", "low", "x"), rule) == v.REPRODUCED
+        assert getattr(v.higher(ev, "low", "fast", "x"), rule) == v.NOT
+    assert v.faster(ev, "fast", "slow", "x").estimate == "P(fast faster) 1.000 [1.000, 1.000]"
 
 
 def test_within_noise_is_direction_only():
-    df = curves({"a": (50_000, 1.0), "b": (51_000, 1.0)}, noise=0.3)
-    s = v.summary(df)
-    verdict = v.faster(s, "a", "b", "a faster")
+    ev = evidence({"a": (50_000, 1.0), "b": (51_000, 1.0)}, noise=0.3)
+    verdict = v.faster(ev, "a", "b", "a faster")
     assert verdict.status in (v.DIRECTION, v.NOT) and not verdict.held
+    assert verdict.se_status in (v.DIRECTION, v.NOT)
 
 
 def test_better_uses_final_then_speed():
-    df = curves({"hi": (80_000, 1.0), "lo": (10_000, 0.6), "twin": (20_000, 1.0)})
-    s = v.summary(df)
-    assert v.better(s, "hi", "lo", "x").held  # higher plateau wins despite being slower
-    assert not v.better(s, "lo", "hi", "x").held
-    assert v.better(s, "twin", "hi", "x").held  # same plateau: decided by speed
+    ev = evidence({"hi": (80_000, 1.0), "lo": (10_000, 0.6), "twin": (20_000, 1.0)})
+    assert v.better(ev, "hi", "lo", "x").held  # higher plateau wins despite being slower
+    assert not v.better(ev, "lo", "hi", "x").held
+    assert v.better(ev, "twin", "hi", "x").held  # same plateau: decided by speed
+    assert v.better(ev, "twin", "hi", "x").estimate.startswith("P(twin faster)")
 
 
 def test_stuck_and_optimal():
-    df = curves({"stuck": (10_000, 0.5), "ok": (10_000, 1.0)})
-    s = v.summary(df)
-    assert v.stuck(s, "stuck", "x").held and not v.stuck(s, "ok", "x").held
-    assert v.optimal(s, "ok", "x").held and not v.optimal(s, "stuck", "x").held
+    ev = evidence({"stuck": (10_000, 0.5), "ok": (10_000, 1.0)})
+    assert v.stuck(ev, "stuck", "x").held and not v.stuck(ev, "ok", "x").held
+    assert v.optimal(ev, "ok", "x").held and not v.optimal(ev, "stuck", "x").held
+
+
+def test_stuck_with_some_seeds_escaping_is_direction_only():
+    # 3 seeds stuck at half the optimum, 2 reach it: IQM (0.5 + 0.5 + 1) / 3 < 0.95, but
+    # resamples with 4 or 5 escaping seeds (probability 0.087 > 2.5%) put the interval above.
+    df = pd.concat([curves({"a": (10_000, 0.5)}, seeds=3),
+                    curves({"a": (10_000, 1.0)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)])
+    verdict = v.stuck(v.Evidence(df), "a", "x")
+    assert verdict.status == v.DIRECTION
+    assert verdict.estimate.startswith("IQM final 0.667 [")
 
 
 def test_figure_claims_follow_the_data():
@@ -68,13 +167,23 @@ def test_figure_claims_follow_the_data():
     assert not held["MAPPO (shared parameters) stays below the optimum"]
     assert not held["OATRPO converges faster than OAPPO"]
     sentence = v.claims("fig3b", bad)[0].sentence()
-    assert "not reproduced" in sentence and "mappo 1.000" in sentence
+    assert "not reproduced" in sentence and "mappo 1.000 [1.000, 1.000]" in sentence
+
+
+def test_claim_table_has_a_row_per_budget_and_claim():
+    good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
+                   "oatrpo": (30_000, 1.0)})
+    table = v.claim_table({"five": v.claims("fig3b", good), "one": v.claims("fig3b", good[good["seed"] == 0])})
+    assert len(table) == 2 * len(v.CLAIMS["fig3b"])
+    by = table.set_index("budget")
+    assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
+    assert (by.loc["one", "verdict"] == v.DIRECTION).all()  # one seed never proves anything
 
 
 def test_one_seed_is_never_more_than_direction():
-    df = curves({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
-    verdict = v.faster(v.summary(df), "fast", "slow", "x")
-    assert verdict.status == v.DIRECTION
+    ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
+    verdict = v.faster(ev, "fast", "slow", "x")
+    assert verdict.status == v.DIRECTION and verdict.se_status == v.DIRECTION
 
 
 def test_censored_seeds_never_make_a_run_faster():
@@ -82,9 +191,11 @@ def test_censored_seeds_never_make_a_run_faster():
     a = curves({"a": (20_000, 1.0)}, seeds=3)
     a_stuck = curves({"a": (20_000, 0.5)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)
     b = curves({"b": (70_000, 1.0)})
-    s = v.summary(pd.concat([a, a_stuck, b]))
+    ev = v.Evidence(pd.concat([a, a_stuck, b]))
+    s = ev.summary
     assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
-    assert v.faster(s, "a", "b", "a faster").status == v.NOT
+    verdict = v.faster(ev, "a", "b", "a faster")
+    assert verdict.status == v.NOT and verdict.se_status == v.NOT
 
 
 def test_unknown_figure_raises():

@@ -1,0 +1,60 @@
+"""The layout study's grid (issue 12): which runs, on which generated layouts, at a budget.
+
+For every layout of ``envs.layouts.LAYOUTS``: OAPPO (sigma 0.1, lambda 0.7) against HAPPO for
+steps to 95% of the optimum, MAPPO's final level, and OAPPO at lambda in {0.2, 0.4, 0.7, 1}.
+Runs share the cache of ``experiments`` (``<data>/runs/<run id>.csv``), so a run is trained
+once whichever family lists its layout. Training is one process at a time.
+"""
+from __future__ import annotations
+
+import pandas as pd
+
+from oapo_lite import experiments, verdicts
+from oapo_lite.envs.layouts import LAYOUTS
+from oapo_lite.train import TrainConfig
+
+LAMBDAS = experiments.LAMBDAS
+# curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
+CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
+    f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam}
+
+
+def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
+    """(layout, curve label, config) for every run of the study at ``budget``."""
+    b = experiments.get_budget(budget)
+    layouts = sorted(LAYOUTS) if layouts is None else list(layouts)
+    unknown = sorted(set(layouts) - set(LAYOUTS))
+    if unknown:
+        raise ValueError(f"unknown layouts {unknown}; the study's layouts are {sorted(LAYOUTS)}")
+    return [(name, label, TrainConfig(env=f"layout:{name}", steps=b.steps, eval_every=b.eval_every,
+                                      eval_episodes=b.eval_episodes, seed=s, **kw))
+            for name in layouts for label, kw in CURVES.items() for s in b.seeds]
+
+
+def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
+    """Tidy rows of the study (training missing runs first, one at a time, if asked)."""
+    frames = []
+    for name, label, cfg in study_runs(budget, layouts):
+        path = experiments.run_path(cfg, budget)
+        if not path.exists():
+            if not run_missing:
+                raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: {path}")
+            experiments._run_one(cfg, budget)
+        frames.append(pd.read_csv(path).assign(layout=name, label=label))
+    return pd.concat(frames, ignore_index=True)
+
+
+def table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per layout and curve: seeds that reached 95%, and the IQMs of steps to 95% and of the
+    final level with their 95% intervals."""
+    return pd.concat({name: verdicts.intervals(rows) for name, rows in df.groupby("layout", sort=False)},
+                     names=["layout", "label"])
+
+
+def oappo_vs_happo(df: pd.DataFrame) -> pd.DataFrame:
+    """Per layout: P(OAPPO reaches 95% of the optimum in fewer steps than HAPPO), with its interval."""
+    rows = {}
+    for name, runs in df.groupby("layout", sort=False):
+        p = verdicts.Evidence(runs).improvement("oappo", "happo", "steps")
+        rows[name] = {"p_oappo_faster": p.point, "low": p.low, "high": p.high}
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")

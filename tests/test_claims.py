@@ -1,0 +1,28 @@
+"""The cross-budget claim table reads only budgets whose runs are all on disk."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from oapo_lite import claims, experiments, verdicts
+
+
+def write_runs(figure, budget, plateau):
+    """A fake finished run per (label, seed): a ramp to ``plateau[label]`` of the optimum."""
+    steps = np.arange(0, 240_001, 16_000)
+    for label, cfg in experiments.figure_runs(figure, budget):
+        path = experiments.run_path(cfg, budget)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        frac = np.minimum(steps / 80_000, 1.0) * plateau[label]
+        pd.DataFrame({"step": steps, "frac_opt": frac, "seed": cfg.seed, "git_rev": "test"}).to_csv(path, index=False)
+
+
+def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="no budget"):
+        claims.table(("fig5b",))
+    write_runs("fig5b", "paper", {"NR": 1.0, "UR": 0.4, "RR": 1.0, "AR": 0.4})
+    assert claims.on_disk("fig5b", "paper") and not claims.on_disk("fig5b", "paper20")
+    table = claims.table(("fig5b",))
+    assert set(table["budget"]) == {"paper (5 seeds)"}
+    assert (table["verdict"] == verdicts.REPRODUCED).all()  # every claim of Fig. 5b holds in this fake data
+    assert len(table) == len(verdicts.CLAIMS["fig5b"])

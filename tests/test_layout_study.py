@@ -1,0 +1,41 @@
+"""The layout study's grid: every curve on every layout, cached like the figures' runs."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from oapo_lite import experiments, layout_study
+from oapo_lite.envs.layouts import LAYOUTS
+
+
+def test_grid_has_every_curve_on_every_layout_once():
+    runs = layout_study.study_runs("paper")
+    assert len(runs) == len(LAYOUTS) * 6 * 5  # 6 curves, 5 seeds
+    assert len({experiments.run_id(cfg) for *_, cfg in runs}) == len(runs)
+    by_label = {label: cfg for _, label, cfg in runs}
+    assert {c.lam for c in by_label.values() if c.algo == "oappo"} == set(experiments.LAMBDAS)
+    assert by_label["happo"].algo == "happo" and by_label["mappo"].algo == "mappo"
+    assert all(cfg.env == f"layout:{name}" for name, _, cfg in runs)
+
+
+def test_unknown_layout_and_missing_runs_raise(tmp_path, monkeypatch):
+    with pytest.raises(ValueError, match="unknown layouts \\['nowhere'\\]"):
+        layout_study.study_runs("smoke", ["nowhere"])
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="is not on disk"):
+        layout_study.load("smoke", run_missing=False)
+
+
+def test_tables_read_the_runs(tmp_path, monkeypatch):
+    # fake finished runs: OAPPO reaches the optimum at 32k steps on every seed, HAPPO at 64k
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    name = sorted(LAYOUTS)[0]
+    steps = np.arange(0, 240_001, 16_000)
+    for _, label, cfg in layout_study.study_runs("paper", [name]):
+        reach = 32_000 if label == "oappo" else 64_000
+        path = experiments.run_path(cfg, "paper")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pd.DataFrame({"step": steps, "frac_opt": np.minimum(steps / reach, 1.0), "seed": cfg.seed}).to_csv(path, index=False)
+    df = layout_study.load("paper", [name], run_missing=False)
+    table = layout_study.table(df)
+    assert table.loc[(name, "oappo"), "steps_iqm"] == 32_000 and table.loc[(name, "happo"), "steps_iqm"] == 64_000
+    assert layout_study.oappo_vs_happo(df).loc[name].tolist() == [1.0, 1.0, 1.0]
