@@ -57,15 +57,22 @@ def check_address(address: str | None) -> None:
 
 def connect(address: str | None, attempts: int = 3, **init_kwargs):
     """The ``ray`` module, connected to the cluster at ``address`` ("auto": the one running on
-    this machine), or to a new one on this machine when None (``init_kwargs`` go to
-    ``ray.init``, e.g. num_cpus); and whether we connected (and so must disconnect; a new
-    cluster stops with its driver)."""
+    this machine), or to a new one on this machine when None; and whether we connected (and so
+    must disconnect; a new cluster stops with its driver). ``init_kwargs`` go to ``ray.init``
+    (runtime_env, and for a new cluster e.g. num_cpus). A driver already connected is used as
+    it is: its runtime env must then provide the package."""
     check_address(address)
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    if address is None:
-        # A private cluster listens on loopback only: without this Ray resolves 127.0.0.1 to
-        # the machine's outward address. Read when ray is imported.
+    host = None if address in (None, "auto") else address.removeprefix("ray://").rsplit(":", 1)[0]
+    if host in (None, "localhost") or host.startswith("127."):
+        # A cluster on this machine listens on loopback: without this Ray "resolves" 127.0.0.1
+        # to the machine's outward address, where nothing answers. Read when ray is imported.
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    token = os.environ.get("RAY_AUTH_TOKEN") or (Path.home() / ".ray" / "auth_token").exists()
+    if address is not None and token:
+        # a cluster started by ray.init (or `ray start`) checks a token by default, but a driver
+        # that connects only sends one in token mode. Read when ray is imported.
+        os.environ.setdefault("RAY_AUTH_MODE", "token")
     try:
         import ray
     except ImportError:
@@ -73,7 +80,7 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
     if ray.is_initialized():
         return ray, False
     if address is not None:
-        ray.init(address=address)
+        ray.init(address=address, **init_kwargs)
         return ray, True
     for attempt in range(1, attempts + 1):
         try:
@@ -103,20 +110,19 @@ def runtime_env() -> dict:
 
 def on_ray(jobs, workers: int | None = None, address: str | None = None):
     """One Ray task per run, asking for the run's CPUs, GPUs and memory. Workers run the
-    driver's copy of the package (shipped as a ``py_modules`` runtime env) and record the
-    driver's git revision; ``workers`` is not used (the cluster's resources decide)."""
+    driver's copy of the package (shipped as the job's ``py_modules`` runtime env) and record
+    the driver's git revision; ``workers`` is not used (the cluster's resources decide)."""
     if not jobs:
         return
-    ray, connected = connect(address)
+    ray, connected = connect(address, runtime_env=runtime_env())
     try:
-        env = runtime_env()
         task = ray.remote(_ray_job)
         pending = {}
         for run, checkpoints in jobs:
             need = dict(num_cpus=run.cpus, num_gpus=run.gpus)
             if run.memory_gb:
                 need["memory"] = int(run.memory_gb * 2**30)
-            pending[task.options(runtime_env=env, **need).remote(run.cfg, checkpoints)] = run
+            pending[task.options(**need).remote(run.cfg, checkpoints)] = run
         while pending:
             (ref,), _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ref)
