@@ -48,15 +48,17 @@ with tempfile.TemporaryDirectory(prefix="oapo-ray-") as temp:
         (run,) = experiments.runs_of("fig1", "smoke")
         job = ray.remote(executors._ray_job).options(num_cpus=1)
         local, remote = [], []
-        for k in range(args.repeats):
+        for k in range(args.repeats + 1):  # the first of each is a cold start (a fresh worker imports torch)
             with tempfile.TemporaryDirectory() as ck:  # no checkpoint to resume from: a full run each time
                 local.append(seconds(lambda: executors.train_job(run.cfg, f"{ck}/local")))
                 remote.append(seconds(lambda: ray.get(job.remote(run.cfg, f"{ck}/ray"))))
+        print(f"first smoke run, cold: {local[0]:.2f} s in this process, {remote[0]:.2f} s as a Ray task")
+        local, remote = local[1:], remote[1:]
         print(f"smoke run ({run.cfg.steps} env steps) in this process: median {statistics.median(local):6.2f} s "
               f"of {[round(t, 2) for t in local]}")
         print(f"the same run as a Ray task:                   median {statistics.median(remote):6.2f} s "
               f"of {[round(t, 2) for t in remote]}")
-        print(f"Ray overhead per run: {statistics.median(remote) - statistics.median(local):+.2f} s "
+        print(f"Ray overhead per run (warm): {statistics.median(remote) - statistics.median(local):+.2f} s "
               f"(median difference)")
     finally:
         ray.shutdown()
