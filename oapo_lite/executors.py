@@ -70,7 +70,7 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     token = os.environ.get("RAY_AUTH_TOKEN") or (Path.home() / ".ray" / "auth_token").exists()
     if address is not None and token:
-        # a cluster started by ray.init (or `ray start`) checks a token by default, but a driver
+        # a cluster started by ray.init checks a token by default (Ray 2.60), but a driver
         # that connects only sends one in token mode. Read when ray is imported.
         os.environ.setdefault("RAY_AUTH_MODE", "token")
     try:
