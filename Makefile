@@ -11,6 +11,10 @@ venv: .venv/installed
 	python3 -m venv .venv
 	.venv/bin/pip install --quiet --upgrade pip
 	.venv/bin/pip install --quiet -r environment.txt
+	# jsonschema's optional rfc3987-syntax (pulled in by jupyter-events) builds a parser on import,
+	# 2 s of CPU in every process that imports ray; on a busy machine Ray's agents then missed the
+	# raylet's fixed 15 s start-up window. Nothing here validates IRIs.
+	.venv/bin/pip uninstall --quiet --yes rfc3987-syntax
 	.venv/bin/pip install --quiet --no-deps --no-build-isolation -e .
 	.venv/bin/python -m ipykernel install --sys-prefix --name python3 > /dev/null
 	touch $@

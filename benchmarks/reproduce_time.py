@@ -4,7 +4,8 @@ Runs `python -m oapo_lite reproduce` with every result written to a fresh tempor
 (OAPO_FIGURES), so nothing is cached and the committed figures are not touched. Prints the
 reproduction's own summary and the total wall time.
 
-    .venv/bin/python benchmarks/reproduce_time.py [--budget paper] [--workers 2]
+    .venv/bin/python benchmarks/reproduce_time.py [--budget paper] [--workers 2] [--executor ray]
+        [--address HOST:PORT] [--skip-notebooks]
 """
 import argparse
 import os
@@ -16,13 +17,20 @@ import time
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")
 parser.add_argument("--workers", type=int, default=2)
+parser.add_argument("--executor", default="local", choices=["local", "ray"])
+parser.add_argument("--address", default=None, help="Ray cluster (default: a private one on this machine)")
+parser.add_argument("--skip-notebooks", action="store_true", help="time the training runs only")
 args = parser.parse_args()
+extra = ["--executor", args.executor] + (["--address", args.address] if args.address else []) \
+    + (["--skip-notebooks"] if args.skip_notebooks else [])
 
 with tempfile.TemporaryDirectory() as tmp:
     env = {**os.environ, "OAPO_FIGURES": tmp}
     start = time.perf_counter()
     subprocess.run([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", args.budget,
-                    "--workers", str(args.workers), "--check"], env=env, check=True)
+                    "--workers", str(args.workers), "--check", *extra], env=env, check=True)
     total = time.perf_counter() - start
-print(f"\nwhole {args.budget}-budget reproduction from nothing: {total / 60:.1f} min wall time "
-      f"on {os.cpu_count()} cores with {args.workers} workers")
+what = "training runs" if args.skip_notebooks else "reproduction"
+print(f"\nwhole {args.budget}-budget {what} from nothing: {total:.1f} s wall time on {os.cpu_count()} cores, "
+      f"executor {args.executor}" + (f" with {args.workers} workers" if args.executor == "local" else "")
+      + f"; load average {os.getloadavg()[0]:.1f} at the end")

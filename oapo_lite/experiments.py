@@ -1,22 +1,24 @@
-"""Experiments of Section 6.1: budgets, the runs behind each figure, and a run cache.
+"""Experiments: budgets, the grid of runs behind each figure (``GRID``, data), and a run cache.
 
-A figure is a list of (label, TrainConfig). Every run's evaluation rows are written to
-``<data>/runs/<run id>.csv`` atomically once the run has finished, so a reproduction that
-is interrupted resumes by skipping what is on disk; a figure's CSV is the concatenation of
-its runs, with a ``label`` column naming the curve each row belongs to.
+A figure is a ``Figure`` entry: curves of TrainConfig settings, each trained on every seed of
+a budget. Runs are trained by an executor (``executors``: this machine's processes, or a Ray
+cluster); the driver writes each run's evaluation rows to ``<data>/runs/<run id>.csv``
+atomically once the run has finished, so a reproduction that is interrupted resumes by
+skipping what is on disk; a figure's CSV is the concatenation of its runs, with a ``label``
+column naming the curve each row belongs to.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+import sys
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import pandas as pd
 
-from oapo_lite.train import TrainConfig, atomic_write, train
+from oapo_lite.train import TrainConfig, atomic_write
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -67,29 +69,85 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
 
 
-def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
-    b = get_budget(budget)
+@dataclass(frozen=True)
+class Figure:
+    """The runs behind one figure, as data: every curve is trained on every seed of the budget.
 
-    def cfg(**kw) -> TrainConfig:
-        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+    ``curves``: (label, TrainConfig fields of that curve); ``common``: fields every curve shares
+    (env, batch shape, ...); ``seeds``: how many of the budget's seeds (None: all);
+    ``budgets``: per-budget overrides of ``Budget`` fields for this figure (a real engine needs
+    more env steps than a maze), e.g. ``{"paper": {"steps": 10_000_000}}``; ``cpus``, ``gpus``,
+    ``memory_gb``: what one run asks a Ray cluster for.
+    """
 
-    grids = {
-        "fig3b": [(a, dict(algo=a, env="black_red")) for a in ("oappo", "oatrpo", "mappo", "happo")],
-        "fig3c": [(s, dict(algo="oappo", env="black_red", sigma=s)) for s in SIGMAS],
-        "fig3d": [(lam, dict(algo="oappo", env="black_red", lam=lam)) for lam in LAMBDAS],
-        # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that
-        # the mask alone decides, as in the paper's "modified OAPPO parameters".
-        "fig5b": [(s, dict(algo="oappo", env="black_blue_red", allowed=s, sigma=float("inf"),
-                           lam=SCHEME_LAM[s])) for s in SCHEMES],
-        "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
-    }
-    if figure not in grids:
-        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids)}")
-    seeds = b.seeds[:1] if figure == "fig1" else b.seeds
-    return [(label, cfg(seed=s, **kw)) for label, kw in grids[figure] for s in seeds]
+    id: str
+    curves: tuple[tuple[object, dict], ...]
+    common: dict = field(default_factory=dict)
+    seeds: int | None = None
+    budgets: dict = field(default_factory=dict)
+    cpus: float = 1.0
+    gpus: float = 0.0
+    memory_gb: float = 0.0
+
+    def budget(self, name: str) -> Budget:
+        return replace(get_budget(name), **self.budgets.get(name, {}))
 
 
-FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")
+# Every figure the project reproduces; a new figure is a new entry here.
+GRID = (
+    Figure("fig3b", tuple((a, dict(algo=a)) for a in ("oappo", "oatrpo", "mappo", "happo")),
+           common=dict(env="black_red")),
+    Figure("fig3c", tuple((s, dict(algo="oappo", sigma=s)) for s in SIGMAS), common=dict(env="black_red")),
+    Figure("fig3d", tuple((lam, dict(algo="oappo", lam=lam)) for lam in LAMBDAS), common=dict(env="black_red")),
+    # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that the mask
+    # alone decides, as in the paper's "modified OAPPO parameters".
+    Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), lam=SCHEME_LAM[s]))
+                          for s in SCHEMES), common=dict(env="black_blue_red")),
+    Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
+)
+FIGURES = tuple(f.id for f in GRID)
+
+
+def get_figure(figure: "Figure | str") -> Figure:
+    if isinstance(figure, Figure):
+        return figure
+    known = {f.id: f for f in GRID}
+    if figure not in known:
+        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(known)}")
+    return known[figure]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One training run of a figure and what it needs (for a Ray cluster)."""
+
+    figure: str
+    label: object
+    cfg: TrainConfig
+    cpus: float = 1.0
+    gpus: float = 0.0
+    memory_gb: float = 0.0
+
+
+def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
+    """A figure's runs at a budget: curve by curve, seed by seed."""
+    fig = get_figure(figure)
+    b = fig.budget(budget)
+    seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
+    return [Run(fig.id, label, TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes,
+                                           seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
+            for label, kw in fig.curves for s in seeds]
+
+
+def figure_runs(figure: "Figure | str", budget: str) -> list[tuple[object, TrainConfig]]:
+    """(label, config) of every run of a figure."""
+    return [(r.label, r.cfg) for r in runs_of(figure, budget)]
+
+
+def _changed(cfg: TrainConfig) -> dict:
+    """The config fields that differ from ``TrainConfig``'s defaults."""
+    defaults = TrainConfig().flat()
+    return {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
 
 
 def run_id(cfg: TrainConfig) -> str:
@@ -97,9 +155,7 @@ def run_id(cfg: TrainConfig) -> str:
     differ from ``TrainConfig``'s defaults. Hashing only those keeps every cached run valid when
     a new field is added with a default that reproduces the old behaviour; changing an existing
     default, on the other hand, must come with a new cache (delete ``runs/``)."""
-    defaults = TrainConfig().flat()
-    changed = {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
-    blob = json.dumps(changed, sort_keys=True, default=str)
+    blob = json.dumps(_changed(cfg), sort_keys=True, default=str)
     return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
@@ -111,49 +167,76 @@ def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
     atomic_write(lambda p: df.to_csv(p, index=False), path)
 
 
-def _run_one(cfg: TrainConfig, budget: str) -> str:
-    path = run_path(cfg, budget)
-    rows = train(cfg, path.parent.parent / "checkpoints" / run_id(cfg), progress=False)
-    write_csv_atomic(rows, path)
-    return run_id(cfg)
+def grid_runs(budget: str, figures=FIGURES) -> list[Run]:
+    """The distinct runs of some figures (a run shared by two figures is trained once)."""
+    runs, seen = [], set()
+    for fig in figures:
+        for run in runs_of(fig, budget):
+            if run_id(run.cfg) not in seen:
+                seen.add(run_id(run.cfg))
+                runs.append(run)
+    return runs
+
+
+@dataclass
+class Failure:
+    run: Run
+    error: str  # the traceback
+
+    def report(self) -> str:
+        return (f"run {run_id(self.run.cfg)} of {self.run.figure} (curve {self.run.label!r}) failed\n"
+                f"  config (non-default fields): {_changed(self.run.cfg)}\n{self.error.rstrip()}")
 
 
 @dataclass
 class RunCount:
     done: int
     cached: int
+    failed: list[Failure] = field(default_factory=list)
 
 
-def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = True) -> RunCount:
-    """Train every run of the given figures that is not on disk yet, ``workers`` at a time."""
+def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str = True,
+            executor: str = "local", address: str | None = None) -> RunCount:
+    """Train every run of the given figures that is not on disk yet, on ``executor``: "local"
+    (``workers`` processes of this machine) or "ray" (a Ray cluster at ``address``; None starts
+    one on this machine). Whatever trains a run, this driver writes its CSV. A run that fails
+    is reported (config and traceback) and the others go on; see ``RunCount.failed``.
+    ``progress``: True (a bar), "lines" (one line per run, for logs) or False."""
     from tqdm import tqdm
 
-    todo, seen = [], set()
-    for fig in figures:
-        for _, cfg in figure_runs(fig, budget):
-            if run_id(cfg) not in seen:
-                seen.add(run_id(cfg))
-                todo.append(cfg)
-    missing = [c for c in todo if not run_path(c, budget).exists()]
-    with tqdm(total=len(missing), desc=f"runs ({budget})", disable=not progress) as bar:
-        if workers <= 1:
-            for c in missing:
-                bar.set_postfix_str(run_id(c))
-                _run_one(c, budget)
-                bar.update()
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(_run_one, c, budget) for c in missing]
-                for f in as_completed(futures):
-                    bar.set_postfix_str(f.result())
-                    bar.update()
-    return RunCount(done=len(missing), cached=len(todo) - len(missing))
+    from oapo_lite import executors
+
+    if executor not in executors.EXECUTORS:
+        raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
+    todo = grid_runs(budget, figures)
+    missing = [r for r in todo if not run_path(r.cfg, budget).exists()]
+    checkpoints = data_dir(budget) / "checkpoints"
+    if missing:  # made here, so that a worker can tell whether it shares this file system
+        checkpoints.mkdir(parents=True, exist_ok=True)
+    jobs = [(run, str(checkpoints / run_id(run.cfg))) for run in missing]
+    failed = []
+    with tqdm(total=len(missing), desc=f"runs ({budget}, {executor})", disable=progress is not True) as bar:
+        for k, (run, rows, error) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
+                                                                              address=address), 1):
+            if error is None:
+                write_csv_atomic(rows, run_path(run.cfg, budget))
+            else:
+                failed.append(Failure(run, error))
+                tqdm.write(failed[-1].report(), file=sys.stderr)
+            bar.set_postfix_str(run_id(run.cfg))
+            bar.update()
+            if progress == "lines":
+                print(f"runs ({budget}, {executor}): {k}/{len(missing)} {'done' if error is None else 'FAILED'} "
+                      f"{run_id(run.cfg)}", flush=True)
+    return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
 
 
 def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
     """The tidy rows of one figure (training its missing runs first, if asked)."""
     if run_missing:
-        run_all(budget, figures=(figure,), progress=False)
+        failed = run_all(budget, figures=(figure,), progress=False).failed
+        if failed:
+            raise RuntimeError(f"{len(failed)} run(s) of {figure} failed (reported above)")
     frames = []
     for label, cfg in figure_runs(figure, budget):
         df = pd.read_csv(run_path(cfg, budget))

@@ -56,20 +56,46 @@ def main(argv: list[str] | None = None) -> int:
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
                         help="CI mode: no progress bars")
-    parser.add_argument("--workers", type=int, default=2, help="parallel training processes")
+    parser.add_argument("--workers", type=int, default=2, help="parallel training processes (local executor)")
+    parser.add_argument("--executor", default="local", choices=["local", "ray"],
+                        help="where runs are trained: this machine's processes, or a Ray cluster")
+    parser.add_argument("--address", default=None,
+                        help="Ray cluster: auto (the one running on this machine) or HOST:PORT of its head; "
+                             "default: start a private one on this machine")
+    parser.add_argument("--figures", nargs="+", default=list(experiments.FIGURES), metavar="FIGURE",
+                        help=f"train only these figures' runs; one or more of {list(experiments.FIGURES)}")
+    parser.add_argument("--skip-notebooks", action="store_true", help="train the runs only")
     args = parser.parse_args(argv)
-    experiments.get_budget(args.budget)  # fail fast on a bad name
+    try:  # fail fast, naming what is allowed
+        experiments.get_budget(args.budget)
+        for figure in args.figures:
+            experiments.get_figure(figure)
+        if args.address is not None and args.executor != "ray":
+            raise ValueError(f"--address {args.address!r} needs --executor ray")
+        if args.executor == "ray":
+            from oapo_lite.executors import check_address
+
+            check_address(args.address)
+    except ValueError as err:
+        parser.error(str(err))
 
     start = time.perf_counter()
-    runs = experiments.run_all(args.budget, workers=args.workers, progress=not args.check)
-    timings = run_notebooks(args.budget, args.inplace)
+    runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
+                               progress="lines" if args.check else True, executor=args.executor,
+                               address=args.address)
+    timings = [] if args.skip_notebooks or runs.failed else run_notebooks(args.budget, args.inplace)
     print("\nSummary")
-    print(f"  experiment runs: {runs.done} trained, {runs.cached} already on disk")
+    print(f"  experiment runs ({args.executor}): {runs.done} trained, {runs.cached} already on disk, "
+          f"{len(runs.failed)} failed")
+    for failure in runs.failed:
+        print(f"  FAILED {experiments.run_id(failure.run.cfg)} ({failure.run.figure}, curve {failure.run.label!r})")
+    if runs.failed:
+        print("  notebooks not run: they need every run (failures reported above with config and traceback)")
     for name, seconds in timings:
         print(f"  {name:<45s} {seconds:6.1f} s")
     print(f"  total wall time: {time.perf_counter() - start:.1f} s")
     print(f"  figures: {experiments.figures_dir(args.budget)}/")
-    return 0
+    return 1 if runs.failed else 0
 
 
 if __name__ == "__main__":

@@ -175,6 +175,10 @@ def _seed(*keys: int) -> int:
 
 
 def git_revision() -> str:
+    """HEAD of the checkout the code runs from; ``OAPO_GIT_REV`` when set (a Ray worker runs a
+    copy of the package shipped by the driver, outside any checkout, and is given the driver's)."""
+    if os.environ.get("OAPO_GIT_REV"):
+        return os.environ["OAPO_GIT_REV"]
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
                              text=True, timeout=10)

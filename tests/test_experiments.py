@@ -39,3 +39,57 @@ def test_paper20_is_paper_with_twenty_seeds():
     for fig in experiments.FIGURES:
         ids = {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper20")}
         assert {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper")} <= ids
+
+
+def test_the_grid_keeps_every_committed_maze_run_valid():
+    """``make reproduce BUDGET=paper`` finds every committed run: the ids did not move."""
+    runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in experiments.figure_runs(fig, "paper")]
+    committed = {p.stem for p in (experiments.ROOT / "figures" / "data" / "runs").glob("*.csv")}
+    assert len(runs) == 81 and {experiments.run_id(cfg) for cfg in runs} <= committed
+
+
+def test_a_new_figure_is_data_with_its_own_budget_overrides():
+    fig = experiments.Figure("sweep", (("a", dict(algo="happo")), ("b", dict(algo="mappo", lr=1e-3))),
+                             common=dict(env="black_blue_red"), seeds=2, budgets={"paper": dict(steps=16_000)},
+                             cpus=2, gpus=0.5)
+    runs = experiments.runs_of(fig, "paper")
+    assert [(r.label, r.cfg.algo, r.cfg.seed) for r in runs] == [("a", "happo", 0), ("a", "happo", 1),
+                                                                ("b", "mappo", 0), ("b", "mappo", 1)]
+    assert {(r.cfg.env, r.cfg.steps, r.cfg.eval_every, r.cpus, r.gpus) for r in runs} == \
+        {("black_blue_red", 16_000, experiments.BUDGETS["paper"].eval_every, 2, 0.5)}
+    assert runs[2].cfg.lr == 1e-3 and runs[0].cfg.lr == 5e-4
+    assert experiments.runs_of(fig, "smoke")[0].cfg.steps == experiments.BUDGETS["smoke"].steps
+    with pytest.raises(ValueError, match="unknown figure 'fig9'.*fig3b"):
+        experiments.runs_of("fig9", "paper")
+
+
+def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
+    from oapo_lite import reproduce
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    (cfg,) = [cfg for _, cfg in experiments.figure_runs("fig1", "smoke")]
+    checkpoint = experiments.data_dir("smoke") / "checkpoints" / experiments.run_id(cfg) / "checkpoint.pt"
+    checkpoint.parent.mkdir(parents=True)
+    checkpoint.write_bytes(b"not a checkpoint")  # the run resumes from it, and raises
+    argv = ["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]
+    assert reproduce.main(argv) == 1
+    out = capsys.readouterr()
+    assert f"FAILED {experiments.run_id(cfg)} (fig1, curve 'oappo')" in out.out and "0 trained" in out.out
+    assert experiments.run_id(cfg) in out.err and "Traceback" in out.err and "'env': 'black_blue_red'" in out.err
+    assert not experiments.run_path(cfg, "smoke").exists()
+    checkpoint.unlink()
+    assert reproduce.main(argv) == 0
+    assert experiments.run_path(cfg, "smoke").exists() and "1 trained, 0 already on disk, 0 failed" in capsys.readouterr().out
+
+
+def test_bad_executor_options_name_what_is_allowed(capsys):
+    from oapo_lite import reproduce
+
+    for argv, message in ((["--figures", "fig9"], "unknown figure 'fig9'"),
+                          (["--address", "auto"], "needs --executor ray"),
+                          (["--executor", "ray", "--address", "http://x"], "allowed: auto, HOST:PORT")):
+        with pytest.raises(SystemExit):
+            reproduce.main(argv)
+        assert message in capsys.readouterr().err
+    with pytest.raises(ValueError, match="unknown executor 'dask'.*local"):
+        experiments.run_all("smoke", executor="dask")

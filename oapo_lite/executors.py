@@ -1,0 +1,139 @@
+"""Where the runs of a grid are trained: this machine's processes ("local") or a Ray cluster ("ray").
+
+An executor takes (run, checkpoint folder) jobs and yields ``(run, rows, error)`` as runs
+finish, in any order: the evaluation rows and None, or None and a traceback. Both train a run
+with the same function, ``train_job``; the driver (``experiments.run_all``) writes the results,
+so an executor never touches the run cache.
+"""
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tempfile
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from oapo_lite.train import git_revision, train
+
+PACKAGE = Path(__file__).resolve().parent
+
+
+def train_job(cfg, checkpoints: str):
+    """Train one run; (rows, None), or (None, traceback) when it raises: a failed run is
+    reported by the driver while the others go on."""
+    try:
+        rows = train(cfg, checkpoints, progress=False)
+    except Exception:
+        return None, traceback.format_exc()
+    rows.attrs.clear()  # the per-iteration history is not part of the result; no need to ship it
+    return rows, None
+
+
+def local(jobs, workers: int = 2, address: str | None = None):
+    """``workers`` processes of this machine (1: in this process)."""
+    if address is not None:
+        raise ValueError(f"address {address!r} is for the ray executor; the local executor takes none")
+    if workers <= 1 or len(jobs) <= 1:
+        for run, checkpoints in jobs:
+            yield (run, *train_job(run.cfg, checkpoints))
+        return
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+        futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
+        for future in as_completed(futures):
+            try:
+                rows, error = future.result()
+            except Exception:  # the worker process itself died (killed, out of memory)
+                rows, error = None, traceback.format_exc()
+            yield futures[future], rows, error
+
+
+def check_address(address: str | None) -> None:
+    if address is None or address == "auto" or re.fullmatch(r"(ray://)?[\w.\-]+:\d+", address):
+        return
+    raise ValueError(f"Ray address {address!r} is invalid; allowed: auto, HOST:PORT or ray://HOST:PORT")
+
+
+def connect(address: str | None, attempts: int = 3, **init_kwargs):
+    """The ``ray`` module, connected to the cluster at ``address`` ("auto": the one running on
+    this machine), or to a new one on this machine when None; and whether we connected (and so
+    must disconnect; a new cluster stops with its driver). ``init_kwargs`` go to ``ray.init``
+    (runtime_env, and for a new cluster e.g. num_cpus). A driver already connected is used as
+    it is: its runtime env must then provide the package."""
+    check_address(address)
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    host = None if address in (None, "auto") else address.removeprefix("ray://").rsplit(":", 1)[0]
+    if host in (None, "localhost") or host.startswith("127."):
+        # A cluster on this machine listens on loopback: without this Ray "resolves" 127.0.0.1
+        # to the machine's outward address, where nothing answers. Read when ray is imported.
+        os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    token = os.environ.get("RAY_AUTH_TOKEN") or (Path.home() / ".ray" / "auth_token").exists()
+    if address is not None and token:
+        # a cluster started by ray.init checks a token by default (Ray 2.60), but a driver
+        # that connects only sends one in token mode. Read when ray is imported.
+        os.environ.setdefault("RAY_AUTH_MODE", "token")
+    try:
+        import ray
+    except ImportError:
+        raise ImportError("the ray executor needs Ray: pip install ray==2.60.0 (pinned in environment.txt)") from None
+    if ray.is_initialized():
+        return ray, False
+    if address is not None:
+        ray.init(address=address, **init_kwargs)
+        return ray, True
+    for attempt in range(1, attempts + 1):
+        try:
+            ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", **init_kwargs)
+            return ray, True
+        except Exception as err:
+            # Ray 2.60's raylet gives its Python agent a fixed 15 s to start and aborts after;
+            # on a busy machine the agent can take longer (seen here at a load of 11 on 2 cores)
+            if "timed out during startup" not in str(err) or attempt == attempts:
+                raise
+            print(f"Ray did not start ({err}); attempt {attempt + 1} of {attempts}", file=sys.stderr)
+
+
+def _ray_job(cfg, checkpoints: str):
+    """``train_job`` on a Ray worker. A worker that does not share the driver's file system
+    (the driver made the checkpoint folder's parent) keeps checkpoints in its own temp folder:
+    a retried run then resumes on the same node, otherwise it restarts."""
+    if not Path(checkpoints).parent.is_dir():
+        checkpoints = str(Path(tempfile.gettempdir()) / "oapo_checkpoints" / Path(checkpoints).name)
+    return train_job(cfg, checkpoints)
+
+
+def runtime_env() -> dict:
+    """What a Ray worker gets: this copy of the package and this checkout's git revision."""
+    return {"py_modules": [str(PACKAGE)], "env_vars": {"OAPO_GIT_REV": git_revision(), "RAY_USAGE_STATS_ENABLED": "0"}}
+
+
+def on_ray(jobs, workers: int | None = None, address: str | None = None):
+    """One Ray task per run, asking for the run's CPUs, GPUs and memory. Workers run the
+    driver's copy of the package (shipped as the job's ``py_modules`` runtime env) and record
+    the driver's git revision; ``workers`` is not used (the cluster's resources decide)."""
+    if not jobs:
+        return
+    ray, connected = connect(address, runtime_env=runtime_env())
+    try:
+        task = ray.remote(_ray_job)
+        pending = {}
+        for run, checkpoints in jobs:
+            need = dict(num_cpus=run.cpus, num_gpus=run.gpus)
+            if run.memory_gb:
+                need["memory"] = int(run.memory_gb * 2**30)
+            pending[task.options(**need).remote(run.cfg, checkpoints)] = run
+        while pending:
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            run = pending.pop(ref)
+            try:
+                rows, error = ray.get(ref)
+            except ray.exceptions.RayError as err:  # the task never returned: worker or node lost
+                rows, error = None, f"{type(err).__name__}: {err}"
+            yield run, rows, error
+    finally:
+        if connected:
+            ray.shutdown()
+
+
+EXECUTORS = {"local": local, "ray": on_ray}
