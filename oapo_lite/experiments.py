@@ -64,13 +64,30 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 # Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
 # lambda = 1 / group size (NR's learners keep everything for themselves anyway).
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
+# SEAC / SePS (A2C, 5-step rollouts) run 16 env copies: 80 env steps an update, 20 updates per
+# PPO iteration of 32 x 50 steps; their evaluations and checkpoints are spaced 20 x as many
+# iterations apart, so every curve is evaluated at the same env steps. SePS pre-trains for the
+# first tenth of the budget, counted in its env steps.
+A2C_ENVS = 16
+A2C_ALGOS = ("seac", "seps")
+BASELINE_ALGOS = ("seac", "seps", "mappo", "happo", "oappo")
+MAZES = ("black_red", "black_blue_red")
 
 
 def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
     b = get_budget(budget)
 
     def cfg(**kw) -> TrainConfig:
+        if kw["algo"] in A2C_ALGOS:
+            return a2c_cfg(**kw)
         return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+
+    def a2c_cfg(**kw) -> TrainConfig:
+        ratio = (TrainConfig.n_envs * TrainConfig.rollout_len) // (A2C_ENVS * TrainConfig.n_step)
+        if kw["algo"] == "seps":
+            kw["seps_pretrain_steps"] = b.steps // 10
+        return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes,
+                           n_envs=A2C_ENVS, checkpoint_every=TrainConfig.checkpoint_every * ratio, **kw)
 
     grids = {
         "fig3b": [(a, dict(algo=a, env="black_red")) for a in ("oappo", "oatrpo", "mappo", "happo")],
@@ -81,6 +98,8 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
         "fig5b": [(s, dict(algo="oappo", env="black_blue_red", allowed=s, sigma=float("inf"),
                            lam=SCHEME_LAM[s])) for s in SCHEMES],
         "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
+        # label: the algorithm; the maze is the ``env`` column
+        "fig_baselines_mazes": [(a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS],
     }
     if figure not in grids:
         raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids)}")
@@ -88,7 +107,7 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
     return [(label, cfg(seed=s, **kw)) for label, kw in grids[figure] for s in seeds]
 
 
-FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")
+FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1", "fig_baselines_mazes")
 
 
 def run_id(cfg: TrainConfig) -> str:
