@@ -8,11 +8,12 @@ import torch
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from oapo_lite import __main__ as cli
 from oapo_lite import seps
 from oapo_lite.a2c import A2C, nstep_returns, seac_loss
 from oapo_lite.envs import make_vec
 from oapo_lite.nets import Actors
-from oapo_lite.train import TrainConfig, collect, train
+from oapo_lite.train import TrainConfig, collect, load_checkpoint, train
 
 torch.set_num_threads(1)
 
@@ -109,12 +110,185 @@ def test_lambda_zero_is_plain_a2c_independent_shared_or_grouped(owner):
         assert all(torch.equal(p, q) for p, q in zip(a2c.params(c), untouched.params(c)))
 
 
-def test_seac_with_lambda_zero_trains_exactly_like_independent_a2c_and_lambda_changes_it(tmp_path):
-    """A whole run: SEAC with lambda = 0 never reads another seat's samples, so corrupting
-    what the others did (through a different lambda-free path) cannot matter; lambda > 0 does."""
-    kw = dict(algo="seac", env="black_blue_red", n_envs=4, steps=400, eval_every=10, eval_episodes=4)
-    a = train(TrainConfig(seac_lambda=0.0, **kw), tmp_path / "a", resume=False, progress=False)
-    b = train(TrainConfig(seac_lambda=0.0, **kw), tmp_path / "b", resume=False, progress=False)
-    c = train(TrainConfig(seac_lambda=1.0, **kw), tmp_path / "c", resume=False, progress=False)
-    assert a["eval_return"].tolist() == b["eval_return"].tolist()
-    assert np.isnan(a["seac_weight"].iloc[-1]) and not np.isnan(c["seac_weight"].iloc[-1])
+def test_davies_bouldin_and_kmeans_on_points_computed_by_hand():
+    x = np.array([[0.0], [2.0], [10.0], [12.0]])
+    # clusters {0, 2} and {10, 12}: scatter 1 each, centroids 10 apart -> (1 + 1) / 10
+    assert seps.davies_bouldin(x, np.array([0, 0, 1, 1])) == pytest.approx(0.2)
+    # {0}, {2, 10, 12}: scatters 0 and 4, centroids 8 apart -> both ratios 0.5
+    assert seps.davies_bouldin(x, np.array([0, 1, 1, 1])) == pytest.approx(0.5)
+    rng = np.random.default_rng(0)
+    assert seps.kmeans(x, 2, rng).tolist() == [0, 0, 1, 1]
+    assert seps.kmeans(x[[2, 0, 3, 1]], 2, rng).tolist() == [0, 1, 0, 1]  # agent 0's cluster is 0
+    with pytest.raises(ValueError, match="k = 5 clusters is invalid for 4 points"):
+        seps.kmeans(x, 5, rng)
+
+
+def test_the_number_of_groups_is_the_best_davies_bouldin_over_2_to_n_minus_1():
+    rng = np.random.default_rng(0)
+    # two far-apart agents and an identical pair: k = 3 puts the pair together (index ~0.007),
+    # k = 2 must merge one of the far ones into a group (index ~0.5)
+    z = np.array([[0.0, 0.0], [5.0, 5.0], [-5.0, 5.0], [-5.0, 5.1]])
+    labels, scores = seps.choose_groups(z, None, rng)
+    assert labels.tolist() == [0, 1, 2, 2] and sorted(scores) == [2, 3] and scores[3] < scores[2]
+    assert scores[3] == pytest.approx(seps.davies_bouldin(z, labels))
+    pairs = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.0, 5.1]])
+    assert seps.choose_groups(pairs, 2, rng)[0].tolist() == [0, 0, 1, 1]  # a given k is used as is
+    assert seps.choose_groups(pairs[:2], None, rng)[0].tolist() == [0, 1]  # no k in 2..n-1: no sharing
+    assert seps.group_names([1, 1, 0, 1], ["black", "blue", "red", "x"]) == "black+blue+x | red"
+
+
+class Ring(ParallelEnv):
+    """Four agents on a ring of 6 cells, all starting on cell 0. Action 1 moves an agent by its
+    type's stride ('a': +1, 'b': -2, 'c': +3); action 0 stays. Team reward: the share of agents
+    on cell 3. ``agents`` names them, so their first letters choose the types."""
+
+    metadata = {"name": "ring_v0"}
+    CELLS, LENGTH = 6, 8
+
+    STRIDE = {"a": 1, "b": -2, "c": 3}
+
+    def __init__(self, agents=("a0", "b0", "a1", "b1"), continuous=False, obs_dims=None):
+        self.possible_agents = list(agents)
+        dims = obs_dims or [self.CELLS] * 4
+        self._obs = {k: spaces.Box(0, 1, (d,), np.float32) for k, d in zip(self.possible_agents, dims)}
+        self.continuous = continuous
+        self._act = spaces.Box(-1, 1, (1,), np.float32) if continuous else spaces.Discrete(2)
+
+    def observation_space(self, agent):
+        return self._obs[agent]
+
+    def action_space(self, agent):
+        return self._act
+
+    def _observe(self):
+        return {k: np.eye(self._obs[k].shape[0], dtype=np.float32)[self.pos[k]] for k in self.agents}
+
+    def reset(self, seed=None, options=None):
+        self.agents, self.t = list(self.possible_agents), 0
+        self.pos = dict.fromkeys(self.agents, 0)
+        return self._observe(), {k: {} for k in self.agents}
+
+    def step(self, actions):
+        self.t += 1
+        for k, a in actions.items():
+            move = float(np.ravel(a)[0]) > 0 if self.continuous else a == 1
+            self.pos[k] = (self.pos[k] + self.STRIDE[k[0]] * move) % self.CELLS
+        reward = float(np.mean([p == 3 for p in self.pos.values()]))
+        agents, done = self.agents, self.t >= self.LENGTH
+        obs = self._observe()
+        if done:
+            self.agents = []
+        return obs, dict.fromkeys(agents, reward), dict.fromkeys(agents, False), dict.fromkeys(agents, done), \
+            {k: {} for k in agents}
+
+
+RING = dict(algo="seps", env_fn=Ring, n_envs=8, steps=40 * 30, seps_pretrain_steps=40 * 20, eval_every=10,
+            eval_episodes=4)
+# the VAE needs some data: 4,000 env steps give 16,000 transitions (1,250 VAE steps)
+RING_VAE = {**RING, "steps": 40 * 105, "seps_pretrain_steps": 40 * 100, "eval_every": 50}
+
+
+def test_seps_groups_two_identical_agents_and_keeps_two_different_ones_apart(tmp_path):
+    """Agents a and b move differently from each other and from the identical c0, c1: the
+    Davies-Bouldin choice (k in 2..3) is k = 3, the c's share a network."""
+    rows = train(TrainConfig(**{**RING_VAE, "env_fn": lambda: Ring(("a", "c0", "b", "c1"))}), tmp_path,
+                 resume=False, progress=False)
+    assert rows["seps_groups"].iloc[0] != rows["seps_groups"].iloc[0]  # NaN: no update before the first row
+    assert rows["seps_groups"].iloc[1] == "a+c0+b+c1"  # pre-training: one shared network
+    assert rows["seps_groups"].iloc[-1] == "a | c0+c1 | b"
+    learner = load_checkpoint(tmp_path)["a2c"]
+    assert learner["owner"] == [0, 1, 2, 1] and sorted(learner["db_scores"]) == [2, 3]
+    z = learner["embeddings"]
+    assert np.linalg.norm(z[1] - z[3]) < min(np.linalg.norm(z[0] - z[1]), np.linalg.norm(z[2] - z[1])) / 2
+
+
+def test_seps_with_two_groups_given_pairs_the_identical_agents(tmp_path):
+    """Two types of two identical agents each, k = 2 given: the types are the groups."""
+    rows = train(TrainConfig(**{**RING_VAE, "seps_clusters": 2}), tmp_path, resume=False, progress=False)
+    assert rows["seps_groups"].iloc[-1] == "a0+a1 | b0+b1"
+
+
+def test_seps_with_one_group_is_parameter_sharing_and_with_n_groups_no_sharing(tmp_path):
+    """k = 1: the switch after pre-training changes nothing, so the run equals one whose
+    pre-training ends at another time (the VAE draws from its own generators). k = n: every
+    agent alone, each network a copy of the pre-trained one at the switch."""
+    one_a = train(TrainConfig(**{**RING, "seps_clusters": 1}), tmp_path / "a", resume=False, progress=False)
+    one_b = train(TrainConfig(**{**RING, "seps_clusters": 1, "seps_pretrain_steps": 40 * 5}), tmp_path / "b",
+                  resume=False, progress=False)
+    assert one_a["seps_groups"].iloc[-1] == "a0+b0+a1+b1"
+    assert one_a["eval_return"].tolist() == one_b["eval_return"].tolist()
+    ck_a, ck_b = load_checkpoint(tmp_path / "a"), load_checkpoint(tmp_path / "b")
+    assert all(torch.equal(ck_a["actors"][k], ck_b["actors"][k]) for k in ck_a["actors"])
+
+    cfg = TrainConfig(**{**RING, "seps_clusters": 4, "steps": 40 * 20, "seps_pretrain_steps": 40 * 20 - 40})
+    rows = train(cfg, tmp_path / "n", resume=False, progress=False)
+    assert rows["seps_groups"].iloc[-1] == "a0 | b0 | a1 | b1"
+    # after the switch every net took one A2C step from the same copy, on its own seat only
+    actors = load_checkpoint(tmp_path / "n")["actors"]
+    first = [actors[f"weights.{k}.0"] for k in range(4)]
+    assert all(not torch.equal(first[0], w) for w in first[1:])
+    assert all((first[0] - w).abs().max() < 1e-2 for w in first[1:])
+
+
+@pytest.mark.parametrize("algo, crash_at", [("seac", 7), ("seps", 7), ("seps", 23)])
+def test_resuming_seac_and_seps_gives_the_uninterrupted_numbers(tmp_path, algo, crash_at):
+    """Crashes before and after SePS's switch (iteration 20); checkpoints every 5 iterations."""
+    cfg = TrainConfig(**{**RING, "algo": algo, "checkpoint_every": 5})
+    full = train(cfg, tmp_path / "full", resume=False, progress=False)
+
+    def crash(metrics):
+        if metrics["iteration"] == crash_at:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    resumed = train(cfg, tmp_path / "resumed", progress=False)
+    cols = [c for c in full.columns if c != "git_rev"]
+    assert full[cols].equals(resumed[cols])
+    a, b = load_checkpoint(tmp_path / "full")["actors"], load_checkpoint(tmp_path / "resumed")["actors"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("algo", ["seac", "seps"])
+def test_box_actions_train_and_different_spaces_raise(tmp_path, algo):
+    rows = train(TrainConfig(**{**RING, "algo": algo, "env_fn": lambda: Ring(continuous=True)}), tmp_path / "box",
+                 resume=False, progress=False)
+    assert np.isfinite(rows["eval_return"]).all()
+    with pytest.raises(ValueError, match=r"reuse between agents 'a0' and 'b0' needs equal spaces"):
+        train(TrainConfig(**{**RING, "algo": algo, "env_fn": lambda: Ring(obs_dims=[6, 7, 6, 7])}),
+              tmp_path / "bad", resume=False, progress=False)
+
+
+@pytest.mark.parametrize("bad, words", [
+    (dict(algo="seps", seps_pretrain_steps=1200), ["seps_pretrain_steps", "1200", "< steps = 1200"]),
+    (dict(algo="seps", seps_pretrain_steps=10), ["seps_pretrain_steps", "10", ">= n_envs * n_step = 40"]),
+    (dict(algo="seac", seac_lambda=-1.0), ["seac_lambda", "-1.0", ">= 0"]),
+    (dict(algo="seps", seps_clusters=0), ["seps_clusters", "0", "None or an integer >= 1"]),
+])
+def test_bad_seac_seps_values_raise_naming_the_value(bad, words):
+    with pytest.raises(ValueError) as err:
+        TrainConfig(**{**RING, **bad})
+    for word in words:
+        assert word in str(err.value)
+
+
+@pytest.mark.parametrize("bad, words", [
+    (dict(algo="seps", seps_clusters=5), ["seps_clusters = 5", "4 agents", "1..4"]),
+    (dict(algo="seac", bootstrap_truncation=True), ["bootstrap_truncation = True", "None or False"]),
+    (dict(algo="seac", shared=True), ["shared = True", "allowed: None"]),
+])
+def test_settings_seac_and_seps_cannot_use_raise_at_the_start(tmp_path, bad, words):
+    with pytest.raises(ValueError) as err:
+        train(TrainConfig(**{**RING, **bad}), tmp_path, resume=False, progress=False)
+    for word in words:
+        assert word in str(err.value)
+
+
+def test_the_cli_trains_seac_and_seps_on_a_maze(tmp_path, capsys):
+    for algo in ("seac", "seps"):
+        assert cli.main(["train", "--algo", algo, "--env", "black_red", "--n-envs", "8", "--steps", "800",
+                         "--seps-pretrain-steps", "400", "--seps-clusters", "none", "--out", str(tmp_path),
+                         "--no-progress"]) == 0
+        assert f"{algo} on black_red, seed 0: 800 env steps" in capsys.readouterr().out
+    rows = __import__("pandas").read_csv(tmp_path / "seps_black_red_s0" / "results.csv")
+    assert rows["seps_groups"].iloc[-1] == "red | black"  # two agents: no k in 2..n-1, no sharing
