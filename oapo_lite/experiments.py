@@ -168,16 +168,22 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
     return RunCount(done=len(missing), cached=len(todo) - len(missing))
 
 
-def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked)."""
+def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing: bool = False) -> pd.DataFrame:
+    """The tidy rows of one figure (training its missing runs first, if asked; or, with
+    ``skip_missing``, leaving out the runs not on disk and naming them)."""
     if run_missing:
         run_all(budget, figures=(figure,), progress=False)
-    frames = []
+    frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
+        if skip_missing and not run_path(cfg, budget).exists():
+            missing.append(run_id(cfg))
+            continue
         df = pd.read_csv(run_path(cfg, budget))
         frames.append(df.assign(label=label, figure=figure))
     df = pd.concat(frames, ignore_index=True)
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    if missing:
+        print(f"warning: {figure} leaves out {len(missing)} runs not on disk: {missing}")
     revisions = sorted(df["git_rev"].astype(str).unique())
     if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
         print(f"warning: {figure} mixes runs from git revisions {revisions}")
