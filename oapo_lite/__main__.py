@@ -34,6 +34,7 @@ def train_parser() -> argparse.ArgumentParser:
         "allowed": dict(type=_none_or(str), help="none or a scheme: NR, UR, RR, AR"),
         "shared": dict(type=_none_or(_bool), help="none (the algorithm's choice), true or false"),
         "bootstrap_truncation": dict(type=_none_or(_bool), help="none (no on the built-in mazes), true or false"),
+        "seps_clusters": dict(type=_none_or(int), help="none (chosen by the Davies-Bouldin index) or a number"),
         "env": dict(type=str, help=f"a built-in map {sorted(MAPS)} or a path to a map text file"),
     }
     for f in dataclasses.fields(TrainConfig):

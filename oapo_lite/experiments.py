@@ -67,6 +67,14 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 # Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
 # lambda = 1 / group size (NR's learners keep everything for themselves anyway).
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
+# SEAC / SePS (A2C, 5-step rollouts) run 16 env copies: 80 env steps an update, 20 updates per
+# PPO iteration of 32 x 50 steps; their evaluations and checkpoints are spaced 20 x as many
+# iterations apart, so every curve is evaluated at the same env steps. SePS pre-trains for the
+# first tenth of the budget, counted in its env steps.
+A2C_ENVS = 16
+A2C_ALGOS = ("seac", "seps")
+BASELINE_ALGOS = ("seac", "seps", "mappo", "happo", "oappo")
+MAZES = ("black_red", "black_blue_red")
 
 
 @dataclass(frozen=True)
@@ -104,6 +112,8 @@ GRID = (
     Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), lam=SCHEME_LAM[s]))
                           for s in SCHEMES), common=dict(env="black_blue_red")),
     Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
+    # label: the algorithm; the maze is the ``env`` column
+    Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
 )
 FIGURES = tuple(f.id for f in GRID)
 
@@ -134,9 +144,20 @@ def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
     fig = get_figure(figure)
     b = fig.budget(budget)
     seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
-    return [Run(fig.id, label, TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes,
-                                           seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
+    return [Run(fig.id, label, _config(b, seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
             for label, kw in fig.curves for s in seeds]
+
+
+def _config(b: Budget, **kw) -> TrainConfig:
+    """A run's config at budget ``b``; A2C runs are evaluated and checkpointed at the same env
+    steps as the PPO family's (see ``A2C_ENVS``)."""
+    if kw["algo"] not in A2C_ALGOS:
+        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+    ratio = (TrainConfig.n_envs * TrainConfig.rollout_len) // (A2C_ENVS * TrainConfig.n_step)
+    if kw["algo"] == "seps":
+        kw["seps_pretrain_steps"] = b.steps // 10
+    return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes,
+                       n_envs=A2C_ENVS, checkpoint_every=TrainConfig.checkpoint_every * ratio, **kw)
 
 
 def figure_runs(figure: "Figure | str", budget: str) -> list[tuple[object, TrainConfig]]:
@@ -231,18 +252,24 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
 
 
-def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked)."""
+def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing: bool = False) -> pd.DataFrame:
+    """The tidy rows of one figure (training its missing runs first, if asked; or, with
+    ``skip_missing``, leaving out the runs not on disk and naming them)."""
     if run_missing:
         failed = run_all(budget, figures=(figure,), progress=False).failed
         if failed:
             raise RuntimeError(f"{len(failed)} run(s) of {figure} failed (reported above)")
-    frames = []
+    frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
+        if skip_missing and not run_path(cfg, budget).exists():
+            missing.append(run_id(cfg))
+            continue
         df = pd.read_csv(run_path(cfg, budget))
         frames.append(df.assign(label=label, figure=figure))
     df = pd.concat(frames, ignore_index=True)
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    if missing:
+        print(f"warning: {figure} leaves out {len(missing)} runs not on disk: {missing}")
     revisions = sorted(df["git_rev"].astype(str).unique())
     if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
         print(f"warning: {figure} mixes runs from git revisions {revisions}")

@@ -1,4 +1,5 @@
-"""One training loop for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO (Algorithm 1).
+"""One training loop for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO (Algorithm 1), and for
+the experience-sharing baselines SEAC and SePS (their A2C learner: ``oapo_lite/a2c.py``).
 
 Each iteration: collect a vectorised rollout, compute the joint advantage with one
 centralised critic and GAE, measure the policy distances K and the reuse matrix M (Eq. 9),
@@ -24,6 +25,7 @@ import pandas as pd
 import torch
 
 from oapo_lite import reuse
+from oapo_lite.a2c import Learner as A2CLearner
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.core import VecMaze
 from oapo_lite.envs.oracle import optimal_return
@@ -40,6 +42,7 @@ class AlgoSpec:
     sequential: bool  # random update order and the factor rho
     trust_region: bool  # Eq. 7 (TRPO step) instead of Eq. 8 (PPO clip)
     shared: bool  # one network for every seat
+    a2c: bool = False  # SEAC / SePS: their A2C learner (oapo_lite/a2c.py) replaces the update below
 
 
 ALGOS = {
@@ -49,6 +52,9 @@ ALGOS = {
     "hatrpo": AlgoSpec("own", True, True, False),
     "mappo": AlgoSpec("uniform", False, False, True),
     "ippo": AlgoSpec("own", False, False, False),
+    # both may learn from every seat's samples, so all spaces must match (checked like MAPPO's)
+    "seac": AlgoSpec("uniform", False, False, False, a2c=True),
+    "seps": AlgoSpec("uniform", False, False, False, a2c=True),
 }
 SCHEMES = ("AR", "NR", "RR", "UR")
 
@@ -94,6 +100,15 @@ class TrainConfig:
     eval_episodes: int = 32
     max_steps: int = 50
     checkpoint_every: int = 25  # iterations
+    # SEAC and SePS train with A2C at their papers' defaults (ANCHORS.md); the PPO / TRPO fields
+    # above (rollout_len, lr, critic_lr, ppo_epochs, clip, max_grad_norm, ...) do not apply to them
+    n_step: int = 5  # their n-step returns, and so their rollout length
+    a2c_lr: float = 3e-4
+    a2c_adam_eps: float = 1e-3
+    a2c_max_grad_norm: float = 0.5
+    seac_lambda: float = 1.0  # weight of the other agents' importance-weighted terms
+    seps_clusters: int | None = None  # None: the best Davies-Bouldin index over 2..n-1
+    seps_pretrain_steps: int = 20_000  # env steps on one shared network before clustering; part of ``steps``
 
     def __post_init__(self):
         def need(ok: bool, name: str, allowed: str):
@@ -109,8 +124,8 @@ class TrainConfig:
                      "line_search_steps", "eval_every", "eval_episodes", "max_steps", "checkpoint_every"):
             need(int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 1, name, "an integer >= 1")
         need(int(self.seed) == self.seed and self.seed >= 0, "seed", "an integer >= 0")
-        need(self.steps >= self.n_envs * self.rollout_len, "steps",
-             f">= n_envs * rollout_len = {self.n_envs * self.rollout_len} (one iteration)")
+        need(self.steps >= self.n_envs * self.rollout_steps, "steps",
+             f">= n_envs * rollout_len = {self.n_envs * self.rollout_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "lam"):
             need(0.0 <= getattr(self, name) <= 1.0, name, "[0, 1]")
@@ -127,10 +142,25 @@ class TrainConfig:
             need(self.allowed in SCHEMES, "allowed", f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
         elif self.allowed is not None:
             self.allowed = np.asarray(self.allowed, dtype=bool)
+        for name in ("n_step", "seps_pretrain_steps"):
+            need(int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 1, name, "an integer >= 1")
+        for name in ("a2c_lr", "a2c_adam_eps", "a2c_max_grad_norm"):
+            need(getattr(self, name) > 0, name, "> 0")
+        need(self.seac_lambda >= 0, "seac_lambda", ">= 0")
+        need(self.seps_clusters is None or (int(self.seps_clusters) == self.seps_clusters and self.seps_clusters >= 1),
+             "seps_clusters", "None or an integer >= 1")
+        if self.algo == "seps":
+            need(self.n_envs * self.n_step <= self.seps_pretrain_steps < self.steps, "seps_pretrain_steps",
+                 f">= n_envs * n_step = {self.n_envs * self.n_step} (one iteration) and < steps = {self.steps}")
+
+    @property
+    def rollout_steps(self) -> int:
+        """Steps of every env copy per iteration: ``n_step`` for SEAC / SePS, else ``rollout_len``."""
+        return self.n_step if ALGOS[self.algo].a2c else self.rollout_len
 
     @property
     def n_iterations(self) -> int:
-        return self.steps // (self.n_envs * self.rollout_len)
+        return self.steps // (self.n_envs * self.rollout_steps)
 
     def flat(self) -> dict:
         """The config as CSV-friendly scalars."""
@@ -528,6 +558,8 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
     actor_opts = [] if spec.trust_region else [torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5)
                                                for k in range(n_nets)]
     critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
+    learner = A2CLearner(cfg, env, actors, init_gen) if spec.a2c else None  # SEAC / SePS
+    owner = owner if learner is None else learner.owner
     act_gen = torch.Generator().manual_seed(_seed(cfg.seed, 1))
     rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
     start, history, rows = 0, [], []
@@ -545,6 +577,9 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
             rng.bit_generator.state = ck["np_rng"]
             env.set_state(ck["env"])
             start, step, history = ck["iteration"], ck["step"], ck["history"]
+            if learner is not None:
+                learner.load_state_dict(ck["a2c"])
+                owner = learner.owner
             # a run extended to more steps has no row where the shorter budget ended off the
             # evaluation grid (evaluating draws no shared randomness, so dropping it changes
             # nothing else), and its rows carry the new config
@@ -554,7 +589,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
             raise ValueError(f"checkpoint {out / 'checkpoint.pt'} has no entry {err} (written by an older "
                              "oapo_lite); use another out_dir or resume=False") from None
     clock = {"env": 0.0, "policy": 0.0, "learn": 0.0, "eval": 0.0}
-    batch_size = cfg.n_envs * cfg.rollout_len
+    batch_size = cfg.n_envs * cfg.rollout_steps
 
     def evaluation(it: int, metrics: dict) -> None:
         tic = time.perf_counter()
@@ -569,25 +604,30 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         evaluation(0, {})
     for it in tqdm(range(start, cfg.n_iterations), initial=start, total=cfg.n_iterations,
                    desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True):
-        batch, step = collect(env, step, actors, owner, cfg.rollout_len, act_gen, clock)
+        batch, step = collect(env, step, actors, owner, cfg.rollout_steps, act_gen, clock)
         tic = time.perf_counter()
-        adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
-        K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
-        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
-        W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
-        W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
-        order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
-        _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
-        critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
-        clock["learn"] += time.perf_counter() - tic
+        if learner is not None:
+            metrics, trpo_kls = learner.learn(batch, step, it), []
+            owner = learner.owner  # SePS regroups once its pre-training ends
+            clock["learn"] += time.perf_counter() - tic
+        else:
+            adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
+            K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
+            M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
+            W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
+            W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
+            order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
+            _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
+            critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
+            clock["learn"] += time.perf_counter() - tic
 
-        accepted = [k for k in trpo_kls if not math.isnan(k)]
-        metrics = {
-            "train_return": _mean_or_nan(batch.episode_returns),
-            "objective": float(np.mean(objectives)), "value_loss": critic_loss,
-            "trpo_kl": _mean_or_nan(accepted), "trpo_accepted": len(accepted),
-            "kl_matrix": json.dumps(np.round(K, 6).tolist()), "reuse_matrix": json.dumps(np.round(M, 6).tolist()),
-        }
+            accepted = [k for k in trpo_kls if not math.isnan(k)]
+            metrics = {
+                "train_return": _mean_or_nan(batch.episode_returns),
+                "objective": float(np.mean(objectives)), "value_loss": critic_loss,
+                "trpo_kl": _mean_or_nan(accepted), "trpo_accepted": len(accepted),
+                "kl_matrix": json.dumps(np.round(K, 6).tolist()), "reuse_matrix": json.dumps(np.round(M, 6).tolist()),
+            }
         history.append({"iteration": it + 1, "step": (it + 1) * batch_size, **metrics, "trpo_kls": trpo_kls})
         if (it + 1) % cfg.eval_every == 0 or it + 1 == cfg.n_iterations:
             evaluation(it + 1, metrics)
@@ -598,7 +638,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                   **{f"actor_opt{k}": opt.state_dict() for k, opt in enumerate(actor_opts)},
                   "act_gen": act_gen.get_state(), "torch_rng": torch.get_rng_state(),
                   "np_rng": rng.bit_generator.state, "env": env.get_state(), "step": step,
-                  "history": history, "rows": rows}
+                  "history": history, "rows": rows, **({} if learner is None else {"a2c": learner.state_dict()})}
             atomic_write(lambda p: torch.save(ck, p), out / "checkpoint.pt")
         if callback is not None:
             callback(history[-1])

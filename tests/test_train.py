@@ -76,7 +76,7 @@ def test_a_wrong_allowed_mask_shape_raises(tmp_path):
         _run(tmp_path, "bad", algo="oappo", allowed=np.ones((3, 3), bool), **SMALL_BR)
 
 
-@pytest.mark.parametrize("algo", sorted(ALGOS))
+@pytest.mark.parametrize("algo", [a for a in sorted(ALGOS) if not ALGOS[a].a2c])  # A2C: test_seac_seps.py
 def test_a_short_run_on_a_corridor_reaches_the_oracle_optimum(tmp_path, algo):
     rows = _run(tmp_path, algo, algo=algo, steps=160 * 30, **TINY)
     assert rows["frac_opt"].iloc[0] < 0.5  # the untrained policy is far from it

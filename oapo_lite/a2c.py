@@ -1,0 +1,218 @@
+"""SEAC (Christianos et al., NeurIPS 2020) and the A2C that SePS trains with.
+
+Both are advantage actor-critic with n-step returns and a critic V(o) per network (not the
+centralised V(s) of the PPO family); each network has one Adam over its actor and its critic,
+and its gradient norm is clipped, as in the SEAC reference code.
+
+SEAC's loss for learner i (the paper's Eq. 4 for the policy, Eq. 5 for the value), on its own
+samples and on every other agent k's samples with the importance weight
+w_ik = pi_i(a_k | o_k) / pi_k(a_k | o_k) (detached, not clipped)::
+
+    policy = -mean[log pi_i(a_i|o_i) (R_i - V_i(o_i))] + lambda sum_k -mean[w_ik log pi_i(a_k|o_k) (R_k - V_i(o_k))]
+    value  =  mean[(R_i - V_i(o_i))^2]               + lambda sum_k  mean[w_ik (R_k - V_i(o_k))^2]
+    loss   = policy + 0.5 value - 0.01 entropy(own samples)
+
+R_k is agent k's n-step return, bootstrapped by its own network's critic (the reference code
+reads it from agent k's storage). lambda = 0 is independent A2C. A network that several seats
+share (SePS) pools its seats' samples in the own-data means: parameter-sharing A2C.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import torch
+from torch import nn
+
+from oapo_lite import seps
+from oapo_lite.losses import source_mean
+from oapo_lite.nets import Actors, Critic
+
+log = logging.getLogger(__name__)
+
+VALUE_COEF = 0.5
+
+
+def nstep_returns(reward: torch.Tensor, done: torch.Tensor, last_value: torch.Tensor, gamma: float) -> torch.Tensor:
+    """n-step returns over a rollout of n steps: R_t = r_t + gamma (1 - done_t) R_{t+1}, with
+    R_n = V(o_n) (the A2C target; ``use_gae=False`` in the reference code). ``reward``, ``done``
+    (T, ...) broadcast against ``last_value`` (...): e.g. (T, N) and (N,). A truncated episode ends like a terminated one (the reference
+    code's default: no ``use_proper_time_limits``)."""
+    returns = torch.empty(reward.shape[0], *last_value.shape)
+    running = last_value
+    for t in reversed(range(reward.shape[0])):
+        running = reward[t] + gamma * torch.where(done[t], 0.0, running)
+        returns[t] = running
+    return returns
+
+
+def _pooled_mean(x: torch.Tensor, active: torch.Tensor | None) -> torch.Tensor:
+    """Mean over every entry of (S, B) ``x`` where ``active`` (all if None)."""
+    return source_mean(x.reshape(-1), None if active is None else active.reshape(-1))
+
+
+def seac_loss(logp: torch.Tensor, logp_behaviour: torch.Tensor, value: torch.Tensor, returns: torch.Tensor,
+              entropy: torch.Tensor, own: torch.Tensor, lam: float, entropy_coef: float,
+              active: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+    """One learner's SEAC loss (module docstring; Eq. 4 + 0.5 Eq. 5 - entropy).
+
+    Row k of the (n, B) inputs is seat k's samples seen by the learner: ``logp`` = log
+    pi_i(a_k | o_k), ``logp_behaviour`` = log pi_k(a_k | o_k) stored at rollout, ``value`` =
+    V_i(o_k), ``returns`` = R_k, ``entropy`` of pi_i(. | o_k). ``own`` (n,) bool marks the
+    learner's seats. Returns (loss, parts: policy, value, entropy and the weights (n, B))."""
+    adv = returns - value
+    w = torch.exp(logp - logp_behaviour).detach()
+    w = torch.where(own[:, None], 1.0, w)
+    policy_terms, value_terms = -w * logp * adv.detach(), w * adv.pow(2)
+    act = (lambda rows: None if active is None else active[rows])
+    others = ~own
+    policy = _pooled_mean(policy_terms[own], act(own)) + lam * source_mean(policy_terms[others], act(others)).sum()
+    value_l = _pooled_mean(value_terms[own], act(own)) + lam * source_mean(value_terms[others], act(others)).sum()
+    ent = _pooled_mean(entropy[own], act(own))
+    loss = policy + VALUE_COEF * value_l - entropy_coef * ent
+    return loss, {"policy": policy, "value": value_l, "entropy": ent, "weights": w}
+
+
+class A2C:
+    """The A2C learner of SEAC and SePS: critics V(o) beside ``actors`` (one per network), one
+    Adam per network over actor and critic, and ``learn(batch, next_obs, owner)``.
+
+    ``lam`` is SEAC's lambda (0: each network learns from its own seats only)."""
+
+    def __init__(self, actors: Actors, obs_dim: int, hidden: tuple[int, ...], lam: float, gamma: float,
+                 lr: float, eps: float, max_grad_norm: float, entropy_coef: float, gen: torch.Generator):
+        self.actors, self.lam, self.gamma = actors, lam, gamma
+        self.max_grad_norm, self.entropy_coef = max_grad_norm, entropy_coef
+        self.critics = nn.ModuleList(Critic(obs_dim, hidden, gen) for _ in range(actors.n_nets))
+        self.opts = [torch.optim.Adam(self.params(k), lr=lr, eps=eps, foreach=True) for k in range(actors.n_nets)]
+
+    def params(self, net: int) -> list[nn.Parameter]:
+        return self.actors.net_params(net) + list(self.critics[net].parameters())
+
+    def values(self, obs: torch.Tensor, nets) -> torch.Tensor:
+        """(len(nets), M): V_c(obs) for every net c in ``nets``; ``obs`` (M, obs_dim)."""
+        return torch.stack([self.critics[c](obs) for c in nets])
+
+    def returns(self, batch, next_obs: torch.Tensor, owner: list[int]) -> torch.Tensor:
+        """(n, B): each seat's n-step returns bootstrapped by its own network's critic on
+        ``next_obs`` (N, n, obs_dim), the observations after the rollout."""
+        with torch.no_grad():
+            last = torch.stack([self.critics[c](next_obs[:, k]) for k, c in enumerate(owner)])
+        done = (batch.terminated | batch.truncated)[:, None]  # (T, 1, N): every seat's episode ends together
+        R = nstep_returns(batch.reward[:, None], done, last, self.gamma)  # (T, n, N)
+        return R.transpose(0, 1).reshape(len(owner), -1)
+
+    def learn(self, batch, next_obs: torch.Tensor, owner: list[int]) -> dict:
+        """One A2C step of every network that controls a seat, on ``batch`` (a ``train.Rollout``)."""
+        inputs, head = batch.inputs, self.actors.head
+        returns = self.returns(batch, next_obs, owner)
+        nets = sorted(set(owner))
+        # every used net on every distinct input in one batched forward, gathered per seat
+        k, U = len(nets), inputs.obs.shape[0]
+        d = self.actors(inputs.obs.expand(k, U, -1), nets, inputs.avail.expand(k, U, -1))[:, inputs.index]
+        v = self.values(inputs.obs, nets)[:, inputs.index]
+        total, parts = 0.0, []
+        for row, net in enumerate(nets):
+            own = torch.tensor([c == net for c in owner])
+            loss, p = seac_loss(head.log_prob(d[row], batch.act), batch.logp, v[row], returns,
+                                head.entropy(d[row]), own, self.lam, self.entropy_coef, batch.active)
+            total, parts = total + loss, parts + [p]
+        for opt in self.opts:
+            opt.zero_grad()
+        total.backward()  # the nets share no parameters: each gets the gradient of its own loss
+        for net in nets:
+            torch.nn.utils.clip_grad_norm_(self.params(net), self.max_grad_norm)
+            self.opts[net].step()
+        others = [p["weights"][[c != net for c in owner]] for p, net in zip(parts, nets)]
+        others = torch.cat([w.reshape(-1) for w in others])
+        mean = (lambda key: float(sum(p[key].detach() for p in parts) / k))
+        return {"policy_loss": mean("policy"), "value_loss": mean("value"), "entropy": mean("entropy"),
+                "seac_weight": float(others.mean()) if self.lam > 0 and others.numel() else float("nan")}
+
+    def copy_net(self, src: int, dst: int) -> None:
+        """Network ``dst`` becomes a copy of ``src``: actor, critic and Adam state."""
+        with torch.no_grad():
+            for a, b in zip(self.params(dst), self.params(src)):
+                a.copy_(b)
+        self.opts[dst].load_state_dict(self.opts[src].state_dict())
+
+    def state_dict(self) -> dict:
+        return {"critics": self.critics.state_dict(), "opts": [o.state_dict() for o in self.opts]}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.critics.load_state_dict(state["critics"])
+        for opt, s in zip(self.opts, state["opts"]):
+            opt.load_state_dict(s)
+
+
+class Learner:
+    """What the training loop drives for ``seac`` and ``seps``: the A2C step of every iteration
+    and, for SePS, the pre-training phase on one shared network followed by the switch to one
+    network per cluster. ``owner`` (seat -> network) is what collect() and evaluate() use."""
+
+    def __init__(self, cfg, env, actors: Actors, gen: torch.Generator):
+        if cfg.bootstrap_truncation:
+            raise ValueError("bootstrap_truncation = True is not available for seac / seps: their n-step returns "
+                             "end at a truncation like at a termination (the reference code's default); "
+                             "allowed: None or False")
+        if cfg.shared is not None:
+            raise ValueError(f"shared = {cfg.shared} is not available for seac / seps (SEAC has one network per "
+                             "agent, SePS chooses its groups); allowed: None")
+        n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
+        if self.seps and cfg.seps_clusters is not None and not 1 <= cfg.seps_clusters <= n:
+            raise ValueError(f"seps_clusters = {cfg.seps_clusters} is invalid for {n} agents; allowed: None or 1..{n}")
+        self.cfg, self.n_actions = cfg, env.n_actions
+        self.a2c = A2C(actors, env.obs_dim, cfg.hidden, cfg.seac_lambda if cfg.algo == "seac" else 0.0, cfg.gamma,
+                       cfg.a2c_lr, cfg.a2c_adam_eps, cfg.a2c_max_grad_norm, cfg.entropy_coef, gen)
+        self.owner = [0] * n if self.seps else list(range(n))
+        self.pretrain_iters = cfg.seps_pretrain_steps // (cfg.n_envs * cfg.n_step) if self.seps else 0
+        self.buffer = seps.Buffer() if self.seps else None
+        self.embeddings, self.db_scores = None, {}
+
+    @property
+    def groups(self) -> str:
+        return seps.group_names(self.owner, self.agents)
+
+    def learn(self, batch, step, it: int) -> dict:
+        """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout."""
+        next_obs = torch.from_numpy(step.obs)
+        if self.buffer is not None:
+            self._record(batch, next_obs)
+        metrics = self.a2c.learn(batch, next_obs, self.owner)
+        if self.buffer is not None and it + 1 == self.pretrain_iters:
+            self._regroup()
+        returns = batch.episode_returns
+        metrics = {"train_return": sum(returns) / len(returns) if returns else float("nan"), **metrics}
+        return {**metrics, "seps_groups": self.groups} if self.seps else metrics
+
+    def _record(self, batch, next_obs: torch.Tensor) -> None:
+        """Store (o, a, o', r, id); o' of the last step is the observation after the rollout
+        (after an auto-reset where the episode ended, as in the reference code)."""
+        obs = batch.inputs.obs[batch.inputs.index]  # (n, B, d)
+        nxt = torch.cat([obs[:, next_obs.shape[0]:], next_obs.transpose(0, 1)], 1)
+        act = batch.act.float() if self.a2c.actors.head.continuous \
+            else torch.nn.functional.one_hot(batch.act, self.n_actions).float()
+        self.buffer.record(obs, act, nxt, batch.reward.reshape(-1), batch.active)
+
+    def _regroup(self) -> None:
+        """End of pre-training: embed the agents, cluster them, and give every cluster a copy of
+        the pre-trained network (actor, critic, Adam state)."""
+        agent, obs, act, nxt, reward = self.buffer.arrays()
+        key = np.random.SeedSequence([self.cfg.seed, 4]).generate_state(1)[0]
+        self.embeddings = seps.agent_embeddings(agent, obs, act, nxt, reward, len(self.owner), int(key))
+        labels, self.db_scores = seps.choose_groups(self.embeddings, self.cfg.seps_clusters,
+                                                    np.random.default_rng(key))
+        for net in range(1, labels.max() + 1):
+            self.a2c.copy_net(0, net)
+        self.owner, self.buffer = labels.tolist(), None
+        log.info("SePS groups after pre-training: %s (Davies-Bouldin by k: %s)", self.groups,
+                 {k: round(v, 4) for k, v in self.db_scores.items()})
+
+    def state_dict(self) -> dict:
+        return {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
+                "embeddings": self.embeddings, "db_scores": self.db_scores}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.a2c.load_state_dict(state["a2c"])
+        self.owner, self.buffer = state["owner"], state["buffer"]
+        self.embeddings, self.db_scores = state["embeddings"], state["db_scores"]
