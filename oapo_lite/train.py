@@ -170,6 +170,21 @@ def check_reuse_spaces(env, pairs: np.ndarray) -> None:
                 f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")
 
 
+class Diverged(FloatingPointError):
+    """A loss, advantage, factor or KL that is NaN or infinite: the run stops (the last
+    checkpoint is written only after a whole finite iteration, so it stays the last good one)."""
+
+    def __init__(self, quantity: str, learner: int | str, where: str = "", then: str = ""):
+        super().__init__(f"{where}{quantity} is not finite (learner {learner}){then}")
+        self.quantity, self.learner = quantity, learner
+
+
+def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, learner: int | str) -> None:
+    """Raise ``Diverged`` naming the quantity and the learner if ``x`` holds a NaN or an inf."""
+    if not torch.isfinite(torch.as_tensor(x)).all():
+        raise Diverged(quantity, learner)
+
+
 def _seed(*keys: int) -> int:
     return int(np.random.SeedSequence(list(keys)).generate_state(1)[0])
 
@@ -323,6 +338,7 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
             own_active = None if active is None else active[src.own].reshape(-1)
             entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
             loss = -(obj + cfg.entropy_coef * entropy)
+            check_finite(loss, "the PPO loss (Eq. 8)", src.net)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
@@ -338,6 +354,8 @@ def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tens
     head = actors.head
     with torch.no_grad():
         d_old = learner_dists(actors, inputs, src)
+        check_finite(off_agent_objective(head.log_prob(d_old, src.act), src.logp_old, src.w, factor, adv, None,
+                                         src.active), "the TRPO surrogate (Eq. 7)", src.net)
 
     def objective() -> torch.Tensor:
         d = learner_dists(actors, inputs, src)
@@ -365,6 +383,7 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     next_value = torch.where(batch.truncated & ~batch.terminated & bootstrap, final_value,
                              torch.where(cut, 0.0, value[1:]))
     adv = gae(batch.reward, value[:-1], next_value, cut, cfg.gamma, cfg.gae_lambda)
+    check_finite(adv, "the joint advantage (GAE)", "all: it is joint")
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
 
 
@@ -377,13 +396,20 @@ def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: s
     with torch.no_grad():
         d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))[owner][:, inputs.index]
     if active is None:
-        return actors.head.kl_matrix(d, reduce)
+        return _finite_distances(actors.head.kl_matrix(d, reduce))
     # where source j did not act, every learner is given j's own distribution: KL exactly 0
     # there, which leaves a max unchanged; a mean is rescaled to the active samples below
     seat, B = torch.arange(active.shape[0]), active.shape[1]
     d = torch.where(active[None, :, :, None], d, d[seat, seat][None])
     K = actors.head.kl_matrix(d, reduce)
-    return K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy()
+    return _finite_distances(K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy())
+
+
+def _finite_distances(K: np.ndarray) -> np.ndarray:
+    bad = np.argwhere(~np.isfinite(K))
+    if len(bad):
+        raise Diverged(f"the policy distance KL K[{bad[0][0]}, {bad[0][1]}] (Eq. 9)", bad[0][0])
+    return K
 
 
 def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
@@ -406,6 +432,7 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, own
                 d_new = learner_dists(actors, batch.inputs, src)[src.own]
                 factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
                                        None if src.active is None else src.active[src.own])
+            check_finite(factor, "the sequential factor rho", net)
     return factor, objectives, trpo_kls
 
 
@@ -417,6 +444,7 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
             loss = value_loss(critic(state[idx]), v_old[idx], target[idx], cfg.clip)
+            check_finite(loss, "the value loss", "critic")
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.max_grad_norm)
@@ -477,6 +505,19 @@ def _check_resumable(cfg: TrainConfig, ck: dict) -> None:
         raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
                          f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}, "
                          "or use another out_dir or resume=False")
+
+
+def _diverged_at(err: Diverged, iteration: int, cfg: TrainConfig, out: Path, owner: list[int],
+                 agents: list[str]) -> Diverged:
+    """``err`` told with the iteration, the seats of the learner (a net index) and the checkpoint."""
+    learner = err.learner
+    if isinstance(learner, int):
+        learner = f"{learner} (seats {[agents[k] for k in range(len(owner)) if owner[k] == learner]})"
+    path = out / "checkpoint.pt"
+    last = (f"the last good checkpoint {path} (iteration {load_checkpoint(out)['iteration']}) is left as it was"
+            if path.exists() else "no checkpoint had been written yet")
+    return Diverged(err.quantity, learner, f"iteration {iteration} of {cfg.algo} seed {cfg.seed}: ",
+                    f"; the run stopped and {last}")
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
@@ -567,14 +608,17 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                    desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True):
         batch, step = collect(env, step, actors, owner, cfg.rollout_len, act_gen, clock)
         tic = time.perf_counter()
-        adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
-        K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
-        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
-        W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
-        W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
-        order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
-        _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
-        critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
+        try:
+            adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
+            K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
+            M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
+            W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
+            W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
+            order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
+            _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
+            critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
+        except Diverged as err:
+            raise _diverged_at(err, it + 1, cfg, out, owner, env.agents) from None
         clock["learn"] += time.perf_counter() - tic
 
         accepted = [k for k in trpo_kls if not math.isnan(k)]
