@@ -28,21 +28,60 @@ def takes_budget(path: Path) -> bool:
     )
 
 
+class NotebookFailed(RuntimeError):
+    """A notebook's cell raised, or its kernel died; the message names the notebook and the cell."""
+
+
+def kernel_manager_class():
+    """jupyter_client's kernel manager, with two defaults changed for a local batch run.
+
+    - IPC transport: the kernel is a child process on this machine, so its channels are Unix
+      sockets, not TCP ports on localhost (over TCP ipykernel warns, rightly, that anyone on the
+      machine could listen in, once per notebook).
+    - No SIGINT before the shutdown request: jupyter_client interrupts the kernel before asking
+      it to shut down, and a kernel still busy with its last message logs "KeyboardInterrupt
+      caught in kernel". nbclient shuts the kernel down only once the last cell has replied (or
+      after its own interrupt on a timeout), so there is nothing to interrupt; a kernel that does
+      not exit after the request is still killed by jupyter_client.
+    """
+    from jupyter_client.manager import AsyncKernelManager
+    from traitlets import CaselessStrEnum
+
+    class BatchKernelManager(AsyncKernelManager):
+        transport = CaselessStrEnum(["tcp", "ipc"], default_value="ipc", config=True)
+
+        async def _async_interrupt_kernel(self) -> None:
+            if not self.shutting_down:
+                await super()._async_interrupt_kernel()
+
+    return BatchKernelManager
+
+
+def run_notebook(path: Path, out: Path, parameters: dict, cwd: Path = NOTEBOOKS) -> None:
+    """Execute ``path`` into ``out`` with papermill; raise ``NotebookFailed`` if a cell fails."""
+    import papermill as pm
+    from papermill.exceptions import PapermillExecutionError
+
+    try:
+        pm.execute_notebook(str(path), str(out), parameters=parameters, kernel_name="python3", language="python",
+                            cwd=str(cwd), progress_bar=False, kernel_manager_class=kernel_manager_class())
+    except PapermillExecutionError as err:
+        trace = "\n".join(err.traceback)
+        raise NotebookFailed(f"{path.name} failed in cell {err.cell_index + 1} (In [{err.exec_count}]) with "
+                             f"{err.ename}: {err.evalue}\n{trace}\nthe executed notebook is {out}") from None
+    except Exception as err:  # the kernel died or timed out: nbclient names no cell then
+        raise NotebookFailed(f"{path.name} failed: {type(err).__name__}: {err}\nthe executed notebook is {out}") from err
+
+
 def run_notebooks(budget: str, inplace: bool) -> list[tuple[str, float]]:
     """Execute every numbered notebook; ``inplace`` overwrites the committed copies."""
-    import papermill as pm
-
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
     timings, paths = [], notebook_paths()
     for i, path in enumerate(paths, 1):
         print(f"[{i}/{len(paths)}] {path.name} (budget={budget})", flush=True)
-        params = {"budget": budget} if takes_budget(path) else {}
         start = time.perf_counter()
-        pm.execute_notebook(
-            str(path), str(out_dir / path.name), parameters=params, kernel_name="python3", language="python",
-            cwd=str(NOTEBOOKS), progress_bar=False,
-        )
+        run_notebook(path, out_dir / path.name, {"budget": budget} if takes_budget(path) else {})
         timings.append((path.name, time.perf_counter() - start))
     return timings
 
@@ -62,7 +101,11 @@ def main(argv: list[str] | None = None) -> int:
 
     start = time.perf_counter()
     runs = experiments.run_all(args.budget, workers=args.workers, progress=not args.check)
-    timings = run_notebooks(args.budget, args.inplace)
+    try:
+        timings = run_notebooks(args.budget, args.inplace)
+    except NotebookFailed as err:
+        print(f"\nerror: {err}", file=sys.stderr)
+        return 1
     print("\nSummary")
     print(f"  experiment runs: {runs.done} trained, {runs.cached} already on disk")
     for name, seconds in timings:
