@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.maps import load_maze
 from oapo_lite.train import TrainConfig, atomic_write, train
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -117,6 +119,11 @@ def _run_one(cfg: TrainConfig, budget: str) -> str:
     return run_id(cfg)
 
 
+def _cost(cfg: TrainConfig) -> int:
+    maze = cfg.env_fn is None and env_registry.split(cfg.env)[0] is None
+    return cfg.steps * (load_maze(cfg.env).n_agents if maze else 1)
+
+
 @dataclass
 class RunCount:
     done: int
@@ -133,7 +140,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
             if run_id(cfg) not in seen:
                 seen.add(run_id(cfg))
                 todo.append(cfg)
-    missing = [c for c in todo if not run_path(c, budget).exists()]
+    # longest first (steps x agents), so that no long run starts last while the other worker idles
+    missing = sorted((c for c in todo if not run_path(c, budget).exists()), key=_cost, reverse=True)
     with tqdm(total=len(missing), desc=f"runs ({budget})", disable=not progress) as bar:
         if workers <= 1:
             for c in missing:

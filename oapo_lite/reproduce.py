@@ -73,17 +73,34 @@ def run_notebook(path: Path, out: Path, parameters: dict, cwd: Path = NOTEBOOKS)
         raise NotebookFailed(f"{path.name} failed: {type(err).__name__}: {err}\nthe executed notebook is {out}") from err
 
 
-def run_notebooks(budget: str, inplace: bool) -> list[tuple[str, float]]:
-    """Execute every numbered notebook; ``inplace`` overwrites the committed copies."""
+def _timed_run(path: Path, out: Path, parameters: dict) -> float:
+    start = time.perf_counter()
+    run_notebook(path, out, parameters)
+    return time.perf_counter() - start
+
+
+def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[str, float]]:
+    """Execute every numbered notebook, ``workers`` at a time (each in its own kernel; they
+    only read the finished runs); ``inplace`` overwrites the committed copies."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
-    timings, paths = [], notebook_paths()
-    for i, path in enumerate(paths, 1):
-        print(f"[{i}/{len(paths)}] {path.name} (budget={budget})", flush=True)
-        start = time.perf_counter()
-        run_notebook(path, out_dir / path.name, {"budget": budget} if takes_budget(path) else {})
-        timings.append((path.name, time.perf_counter() - start))
-    return timings
+    paths = notebook_paths()
+    timings = {}
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        futures = {pool.submit(_timed_run, path, out_dir / path.name,
+                               {"budget": budget} if takes_budget(path) else {}): path for path in paths}
+        for i, future in enumerate(as_completed(futures), 1):
+            path = futures[future]
+            try:
+                timings[path.name] = future.result()
+            except NotebookFailed:
+                for other in futures:
+                    other.cancel()
+                raise
+            print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {timings[path.name]:.1f} s", flush=True)
+    return [(path.name, timings[path.name]) for path in paths]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,14 +112,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
                         help="CI mode: no progress bars")
-    parser.add_argument("--workers", type=int, default=2, help="parallel training processes")
+    parser.add_argument("--workers", type=int, default=2, help="parallel training processes, then notebooks")
     args = parser.parse_args(argv)
     experiments.get_budget(args.budget)  # fail fast on a bad name
 
     start = time.perf_counter()
     runs = experiments.run_all(args.budget, workers=args.workers, progress=not args.check)
     try:
-        timings = run_notebooks(args.budget, args.inplace)
+        timings = run_notebooks(args.budget, args.inplace, args.workers)
     except NotebookFailed as err:
         print(f"\nerror: {err}", file=sys.stderr)
         return 1

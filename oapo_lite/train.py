@@ -296,6 +296,9 @@ class Sources:
     logp_old: torch.Tensor  # (R, B) behaviour log-probs pi_j_old(a_j | o_j)
     kl_w: torch.Tensor  # (R,) trust-region weights (Eq. 7's W[net, rows], own seats never 0)
     active: torch.Tensor | None = None  # (R, B) the source acted on the sample; None: always
+    # the distinct input rows of all the sources' samples, and each sample's position among
+    # them (R, B): every full-batch forward of the learner needs them, so they are found once
+    distinct: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @classmethod
     def of(cls, net: int, W: np.ndarray, owner: list[int], batch: Rollout) -> "Sources":
@@ -310,13 +313,17 @@ class Sources:
         kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
         return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(w, dtype=torch.float32),
                    batch.act[rows], batch.logp[rows], torch.as_tensor(kl_w, dtype=torch.float32),
-                   None if batch.active is None else batch.active[rows])
+                   None if batch.active is None else batch.active[rows],
+                   torch.unique(batch.inputs.index[rows], return_inverse=True))
 
 
 def learner_dists(actors: Actors, inputs: Inputs, src: Sources, idx=slice(None)) -> torch.Tensor:
     """(R, b, P): the learner's distribution on its sources' samples ``idx``, one forward
     over the distinct inputs they use."""
-    used, inverse = torch.unique(inputs.index[src.rows][:, idx], return_inverse=True)
+    if src.distinct is not None and idx == slice(None):
+        used, inverse = src.distinct
+    else:
+        used, inverse = torch.unique(inputs.index[src.rows][:, idx], return_inverse=True)
     return actors(inputs.obs[used].unsqueeze(0), [src.net], inputs.avail[used].unsqueeze(0))[0][inverse]
 
 
@@ -524,7 +531,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
           callback: Callable[[dict], None] | None = None) -> pd.DataFrame:
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
-    With ``resume``, continue from ``out_dir/checkpoint.pt`` if present; the result is then
+    ``results.csv`` is written with every checkpoint. With ``resume``, continue from
+    ``out_dir/checkpoint.pt`` if present; the result is then
     identical to an uninterrupted run. ``callback(metrics)`` is called after every iteration.
     ``result.attrs``: ``history`` (per-iteration metrics) and ``timing`` (seconds in env
     stepping, policy forwards during rollouts, learning and evaluation).
@@ -561,10 +569,10 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
     actors = Actors(n_nets, env.obs_dim, env.n_actions, cfg.hidden, getattr(env, "continuous", False), init_gen)
     critic, value_norm = Critic(env.state_dim, cfg.hidden, init_gen), ValueNorm()
     # one optimiser per net: Adam would move a net that got no gradient through its momentum;
-    # trust-region algorithms step by hand
-    actor_opts = [] if spec.trust_region else [torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5)
+    # trust-region algorithms step by hand. foreach: the same per-tensor kernels, looped in C++
+    actor_opts = [] if spec.trust_region else [torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5, foreach=True)
                                                for k in range(n_nets)]
-    critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
+    critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5, foreach=True)
     act_gen = torch.Generator().manual_seed(_seed(cfg.seed, 1))
     rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
     start, history, rows = 0, [], []
@@ -599,7 +607,6 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         ret, success = evaluate(actors, owner, eval_env, gen, cfg.max_steps)
         rows.append({**config_cols, "git_rev": revision, "iteration": it, "step": it * batch_size,
                      "eval_return": ret, "frac_opt": ret / optimum, "eval_success": success, **metrics})
-        atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
         clock["eval"] += time.perf_counter() - tic
 
     if start == 0:
@@ -639,6 +646,9 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                   "act_gen": act_gen.get_state(), "torch_rng": torch.get_rng_state(),
                   "np_rng": rng.bit_generator.state, "env": env.get_state(), "step": step,
                   "history": history, "rows": rows}
+            # results.csv goes with the checkpoint, so the two always agree (and rewriting the
+            # growing CSV at every evaluation cost a tenth of a paper-budget run)
+            atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
             atomic_write(lambda p: torch.save(ck, p), out / "checkpoint.pt")
         if callback is not None:
             callback(history[-1])
