@@ -37,18 +37,30 @@ def kernel_manager_class():
 
     - IPC transport: the kernel is a child process on this machine, so its channels are Unix
       sockets, not TCP ports on localhost (over TCP ipykernel warns, rightly, that anyone on the
-      machine could listen in, once per notebook).
+      machine could listen in, once per notebook). The sockets get a path of their own in
+      Jupyter's runtime folder: jupyter_client's default, ``kernel-ipc-<n>`` in the working
+      folder, is shared by kernels started at the same time, which then read each other's
+      messages.
     - No SIGINT before the shutdown request: jupyter_client interrupts the kernel before asking
       it to shut down, and a kernel still busy with its last message logs "KeyboardInterrupt
       caught in kernel". nbclient shuts the kernel down only once the last cell has replied (or
       after its own interrupt on a timeout), so there is nothing to interrupt; a kernel that does
       not exit after the request is still killed by jupyter_client.
     """
+    import os
+    import uuid
+
     from jupyter_client.manager import AsyncKernelManager
-    from traitlets import CaselessStrEnum
+    from jupyter_core.paths import jupyter_runtime_dir
+    from traitlets import CaselessStrEnum, default
 
     class BatchKernelManager(AsyncKernelManager):
         transport = CaselessStrEnum(["tcp", "ipc"], default_value="ipc", config=True)
+
+        @default("ip")
+        def _unique_ipc_path(self) -> str:
+            os.makedirs(jupyter_runtime_dir(), exist_ok=True)
+            return os.path.join(jupyter_runtime_dir(), f"oapo-kernel-{uuid.uuid4().hex}-ipc")
 
         async def _async_interrupt_kernel(self) -> None:
             if not self.shutting_down:
