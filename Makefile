@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 BUDGET ?= smoke
 
-.PHONY: reproduce test venv clean
+.PHONY: reproduce test venv book book-deps browser clean
 
 venv: .venv/installed
 
@@ -19,10 +19,28 @@ venv: .venv/installed
 	.venv/bin/python -m ipykernel install --sys-prefix --name python3 > /dev/null
 	touch $@
 
+# The book's Python packages (Sphinx, MyST-NB, MathJax's files, selenium), into .venv.
+book-deps: .venv/book-installed
+
+.venv/book-installed: .venv/installed book-requirements.txt
+	.venv/bin/pip install --quiet -r book-requirements.txt
+	touch $@
+
+# The notebooks as a static site in build/book (committed outputs; nothing is executed).
+book: book-deps
+	$(PY) -m oapo_lite book
+
+# Debian's Chromium and its driver, for the book's browser test (installed once; needs root or sudo).
+browser:
+	@command -v chromium > /dev/null && command -v chromedriver > /dev/null || { \
+	  SUDO=$$( [ "$$(id -u)" -eq 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium chromium-driver; }
+
 reproduce: venv
 	$(PY) -m oapo_lite reproduce --budget $(BUDGET)
 
-test: venv
+# tests/test_book.py builds the book and opens every page in headless Chromium.
+test: venv book-deps browser
 	$(PY) -m pytest -q tests
 	$(PY) -m oapo_lite reproduce --budget smoke --check
 	$(PY) -m pytest -q -p no:cacheprovider --nbval --nbval-current-env --nbval-sanitize-with notebooks/sanitize.cfg notebooks

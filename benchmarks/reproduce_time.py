@@ -2,13 +2,15 @@
 
 Runs `python -m oapo_lite reproduce` with every result written to a fresh temporary folder
 (OAPO_FIGURES), so nothing is cached and the committed figures are not touched. Prints the
-reproduction's own summary and the total wall time.
+reproduction's own summary, the total wall time and the CPU time of all its processes (on a
+machine shared with other jobs the wall time grows, the CPU time much less).
 
     .venv/bin/python benchmarks/reproduce_time.py [--budget paper] [--workers 2] [--executor ray]
         [--address HOST:PORT] [--skip-notebooks]
 """
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -30,7 +32,9 @@ with tempfile.TemporaryDirectory() as tmp:
     subprocess.run([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", args.budget,
                     "--workers", str(args.workers), "--check", *extra], env=env, check=True)
     total = time.perf_counter() - start
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)  # every finished descendant, kernels included
 what = "training runs" if args.skip_notebooks else "reproduction"
 print(f"\nwhole {args.budget}-budget {what} from nothing: {total:.1f} s wall time on {os.cpu_count()} cores, "
       f"executor {args.executor}" + (f" with {args.workers} workers" if args.executor == "local" else "")
-      + f"; load average {os.getloadavg()[0]:.1f} at the end")
+      + f"; CPU time {usage.ru_utime + usage.ru_stime:.0f} s (locally; Ray workers are not counted); "
+      f"load average {os.getloadavg()[0]:.1f} at the end")

@@ -1,4 +1,5 @@
-"""Command line: ``python -m oapo_lite train ...`` (one run) or ``python -m oapo_lite reproduce ...``.
+"""Command line: ``python -m oapo_lite train ...`` (one run), ``python -m oapo_lite reproduce ...``
+or ``python -m oapo_lite book`` (the notebooks as a static site).
 
     python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --lam 0.7 --out runs/
 
@@ -83,6 +84,10 @@ def main(argv: list[str] | None = None) -> int:
         from oapo_lite.reproduce import main as reproduce_main
 
         return reproduce_main(argv[1:])
+    if argv and argv[0] == "book":
+        from oapo_lite.book import main as book_main
+
+        return book_main(argv[1:])
     if not argv or argv[0] not in commands:
         print(__doc__.strip(), file=sys.stderr)
         return 2

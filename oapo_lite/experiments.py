@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.maps import load_maze
 from oapo_lite.train import TrainConfig, atomic_write
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -209,6 +211,11 @@ class Failure:
                 f"  config (non-default fields): {_changed(self.run.cfg)}\n{self.error.rstrip()}")
 
 
+def _cost(cfg: TrainConfig) -> int:
+    maze = cfg.env_fn is None and env_registry.split(cfg.env)[0] is None
+    return cfg.steps * (load_maze(cfg.env).n_agents if maze else 1)
+
+
 @dataclass
 class RunCount:
     done: int
@@ -230,7 +237,9 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
     todo = grid_runs(budget, figures)
-    missing = [r for r in todo if not run_path(r.cfg, budget).exists()]
+    # longest first (steps x agents), so that no long run starts last while the other worker idles
+    missing = sorted((r for r in todo if not run_path(r.cfg, budget).exists()), key=lambda r: _cost(r.cfg),
+                     reverse=True)
     checkpoints = data_dir(budget) / "checkpoints"
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)

@@ -19,27 +19,33 @@ CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dic
     f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam}
 
 
-def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
-    """(layout, curve label, config) for every run of the study at ``budget``."""
-    b = experiments.get_budget(budget)
+def figures(layouts=None) -> list[experiments.Figure]:
+    """One grid entry per layout (not in ``experiments.GRID``: the study is run on request)."""
     layouts = sorted(LAYOUTS) if layouts is None else list(layouts)
     unknown = sorted(set(layouts) - set(LAYOUTS))
     if unknown:
         raise ValueError(f"unknown layouts {unknown}; the study's layouts are {sorted(LAYOUTS)}")
-    return [(name, label, TrainConfig(env=f"layout:{name}", steps=b.steps, eval_every=b.eval_every,
-                                      eval_episodes=b.eval_episodes, seed=s, **kw))
-            for name in layouts for label, kw in CURVES.items() for s in b.seeds]
+    return [experiments.Figure(f"layout_{name}", tuple(CURVES.items()), common=dict(env=f"layout:{name}"))
+            for name in layouts]
+
+
+def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
+    """(layout, curve label, config) for every run of the study at ``budget``."""
+    return [(fig.common["env"].removeprefix("layout:"), label, cfg)
+            for fig in figures(layouts) for label, cfg in experiments.figure_runs(fig, budget)]
 
 
 def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
     """Tidy rows of the study (training missing runs first, one at a time, if asked)."""
+    if run_missing:
+        failed = experiments.run_all(budget, figures=figures(layouts), workers=1, progress=False).failed
+        if failed:
+            raise RuntimeError(f"{len(failed)} run(s) of the layout study failed (reported above)")
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         path = experiments.run_path(cfg, budget)
         if not path.exists():
-            if not run_missing:
-                raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: {path}")
-            experiments._run_one(cfg, budget)
+            raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: {path}")
         frames.append(pd.read_csv(path).assign(layout=name, label=label))
     return pd.concat(frames, ignore_index=True)
 

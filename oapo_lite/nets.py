@@ -130,9 +130,8 @@ class Actors(nn.Module):
 
     def stack(self, nets) -> tuple[list[torch.Tensor], torch.Tensor]:
         """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std)."""
-        nets = [int(k) for k in nets]
-        return ([torch.stack([self.weights[k][p] for k in nets]) for p in range(len(self.weights[0]) - 1)],
-                torch.stack([self.weights[k][-1] for k in nets]))
+        per_net = [list(self.weights[int(k)]) for k in nets]  # indexing a ParameterList is slow
+        return [torch.stack(layer) for layer in zip(*(w[:-1] for w in per_net))], torch.stack([w[-1] for w in per_net])
 
     def apply(self, stacked: tuple[list[torch.Tensor], torch.Tensor], obs: torch.Tensor,
               avail: torch.Tensor | None) -> torch.Tensor:

@@ -28,23 +28,91 @@ def takes_budget(path: Path) -> bool:
     )
 
 
-def run_notebooks(budget: str, inplace: bool) -> list[tuple[str, float]]:
-    """Execute every numbered notebook; ``inplace`` overwrites the committed copies."""
+class NotebookFailed(RuntimeError):
+    """A notebook's cell raised, or its kernel died; the message names the notebook and the cell."""
+
+
+def kernel_manager_class():
+    """jupyter_client's kernel manager, with two defaults changed for a local batch run.
+
+    - IPC transport: the kernel is a child process on this machine, so its channels are Unix
+      sockets, not TCP ports on localhost (over TCP ipykernel warns, rightly, that anyone on the
+      machine could listen in, once per notebook). The sockets get a path of their own in
+      Jupyter's runtime folder: jupyter_client's default, ``kernel-ipc-<n>`` in the working
+      folder, is shared by kernels started at the same time, which then read each other's
+      messages.
+    - No SIGINT before the shutdown request: jupyter_client interrupts the kernel before asking
+      it to shut down, and a kernel still busy with its last message logs "KeyboardInterrupt
+      caught in kernel". nbclient shuts the kernel down only once the last cell has replied (or
+      after its own interrupt on a timeout), so there is nothing to interrupt; a kernel that does
+      not exit after the request is still killed by jupyter_client.
+    """
+    import os
+    import uuid
+
+    from jupyter_client.manager import AsyncKernelManager
+    from jupyter_core.paths import jupyter_runtime_dir
+    from traitlets import CaselessStrEnum, default
+
+    class BatchKernelManager(AsyncKernelManager):
+        transport = CaselessStrEnum(["tcp", "ipc"], default_value="ipc", config=True)
+
+        @default("ip")
+        def _unique_ipc_path(self) -> str:
+            os.makedirs(jupyter_runtime_dir(), exist_ok=True)
+            return os.path.join(jupyter_runtime_dir(), f"oapo-kernel-{uuid.uuid4().hex}-ipc")
+
+        async def _async_interrupt_kernel(self) -> None:
+            if not self.shutting_down:
+                await super()._async_interrupt_kernel()
+
+    return BatchKernelManager
+
+
+def run_notebook(path: Path, out: Path, parameters: dict, cwd: Path = NOTEBOOKS) -> None:
+    """Execute ``path`` into ``out`` with papermill; raise ``NotebookFailed`` if a cell fails."""
     import papermill as pm
+    from papermill.exceptions import PapermillExecutionError
+
+    try:
+        pm.execute_notebook(str(path), str(out), parameters=parameters, kernel_name="python3", language="python",
+                            cwd=str(cwd), progress_bar=False, kernel_manager_class=kernel_manager_class())
+    except PapermillExecutionError as err:
+        trace = "\n".join(err.traceback)
+        raise NotebookFailed(f"{path.name} failed in cell {err.cell_index + 1} (In [{err.exec_count}]) with "
+                             f"{err.ename}: {err.evalue}\n{trace}\nthe executed notebook is {out}") from None
+    except Exception as err:  # the kernel died or timed out: nbclient names no cell then
+        raise NotebookFailed(f"{path.name} failed: {type(err).__name__}: {err}\nthe executed notebook is {out}") from err
+
+
+def _timed_run(path: Path, out: Path, parameters: dict) -> float:
+    start = time.perf_counter()
+    run_notebook(path, out, parameters)
+    return time.perf_counter() - start
+
+
+def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[str, float]]:
+    """Execute every numbered notebook, ``workers`` at a time (each in its own kernel; they
+    only read the finished runs); ``inplace`` overwrites the committed copies."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
-    timings, paths = [], notebook_paths()
-    for i, path in enumerate(paths, 1):
-        print(f"[{i}/{len(paths)}] {path.name} (budget={budget})", flush=True)
-        params = {"budget": budget} if takes_budget(path) else {}
-        start = time.perf_counter()
-        pm.execute_notebook(
-            str(path), str(out_dir / path.name), parameters=params, kernel_name="python3", language="python",
-            cwd=str(NOTEBOOKS), progress_bar=False,
-        )
-        timings.append((path.name, time.perf_counter() - start))
-    return timings
+    paths = notebook_paths()
+    timings = {}
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        futures = {pool.submit(_timed_run, path, out_dir / path.name,
+                               {"budget": budget} if takes_budget(path) else {}): path for path in paths}
+        for i, future in enumerate(as_completed(futures), 1):
+            path = futures[future]
+            try:
+                timings[path.name] = future.result()
+            except NotebookFailed:
+                for other in futures:
+                    other.cancel()
+                raise
+            print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {timings[path.name]:.1f} s", flush=True)
+    return [(path.name, timings[path.name]) for path in paths]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
                         help="CI mode: no progress bars")
-    parser.add_argument("--workers", type=int, default=2, help="parallel training processes (local executor)")
+    parser.add_argument("--workers", type=int, default=2,
+                        help="parallel training processes (local executor), then notebooks")
     parser.add_argument("--executor", default="local", choices=["local", "ray"],
                         help="where runs are trained: this machine's processes, or a Ray cluster")
     parser.add_argument("--address", default=None,
@@ -83,7 +152,12 @@ def main(argv: list[str] | None = None) -> int:
     runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
                                progress="lines" if args.check else True, executor=args.executor,
                                address=args.address)
-    timings = [] if args.skip_notebooks or runs.failed else run_notebooks(args.budget, args.inplace)
+    try:
+        timings = [] if args.skip_notebooks or runs.failed else run_notebooks(args.budget, args.inplace,
+                                                                              args.workers)
+    except NotebookFailed as err:
+        print(f"\nerror: {err}", file=sys.stderr)
+        return 1
     print("\nSummary")
     print(f"  experiment runs ({args.executor}): {runs.done} trained, {runs.cached} already on disk, "
           f"{len(runs.failed)} failed")

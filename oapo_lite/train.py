@@ -200,6 +200,21 @@ def check_reuse_spaces(env, pairs: np.ndarray) -> None:
                 f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")
 
 
+class Diverged(FloatingPointError):
+    """A loss, advantage, factor or KL that is NaN or infinite: the run stops (the last
+    checkpoint is written only after a whole finite iteration, so it stays the last good one)."""
+
+    def __init__(self, quantity: str, learner: int | str, where: str = "", then: str = ""):
+        super().__init__(f"{where}{quantity} is not finite (learner {learner}){then}")
+        self.quantity, self.learner = quantity, learner
+
+
+def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, learner: int | str) -> None:
+    """Raise ``Diverged`` naming the quantity and the learner if ``x`` holds a NaN or an inf."""
+    if not torch.isfinite(torch.as_tensor(x)).all():
+        raise Diverged(quantity, learner)
+
+
 def _seed(*keys: int) -> int:
     return int(np.random.SeedSequence(list(keys)).generate_state(1)[0])
 
@@ -315,6 +330,9 @@ class Sources:
     logp_old: torch.Tensor  # (R, B) behaviour log-probs pi_j_old(a_j | o_j)
     kl_w: torch.Tensor  # (R,) trust-region weights (Eq. 7's W[net, rows], own seats never 0)
     active: torch.Tensor | None = None  # (R, B) the source acted on the sample; None: always
+    # the distinct input rows of all the sources' samples, and each sample's position among
+    # them (R, B): every full-batch forward of the learner needs them, so they are found once
+    distinct: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @classmethod
     def of(cls, net: int, W: np.ndarray, owner: list[int], batch: Rollout) -> "Sources":
@@ -329,13 +347,17 @@ class Sources:
         kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
         return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(w, dtype=torch.float32),
                    batch.act[rows], batch.logp[rows], torch.as_tensor(kl_w, dtype=torch.float32),
-                   None if batch.active is None else batch.active[rows])
+                   None if batch.active is None else batch.active[rows],
+                   torch.unique(batch.inputs.index[rows], return_inverse=True))
 
 
 def learner_dists(actors: Actors, inputs: Inputs, src: Sources, idx=slice(None)) -> torch.Tensor:
     """(R, b, P): the learner's distribution on its sources' samples ``idx``, one forward
     over the distinct inputs they use."""
-    used, inverse = torch.unique(inputs.index[src.rows][:, idx], return_inverse=True)
+    if src.distinct is not None and idx == slice(None):
+        used, inverse = src.distinct
+    else:
+        used, inverse = torch.unique(inputs.index[src.rows][:, idx], return_inverse=True)
     return actors(inputs.obs[used].unsqueeze(0), [src.net], inputs.avail[used].unsqueeze(0))[0][inverse]
 
 
@@ -357,6 +379,7 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
             own_active = None if active is None else active[src.own].reshape(-1)
             entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
             loss = -(obj + cfg.entropy_coef * entropy)
+            check_finite(loss, "the PPO loss (Eq. 8)", src.net)
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
@@ -372,6 +395,8 @@ def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tens
     head = actors.head
     with torch.no_grad():
         d_old = learner_dists(actors, inputs, src)
+        check_finite(off_agent_objective(head.log_prob(d_old, src.act), src.logp_old, src.w, factor, adv, None,
+                                         src.active), "the TRPO surrogate (Eq. 7)", src.net)
 
     def objective() -> torch.Tensor:
         d = learner_dists(actors, inputs, src)
@@ -399,6 +424,7 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     next_value = torch.where(batch.truncated & ~batch.terminated & bootstrap, final_value,
                              torch.where(cut, 0.0, value[1:]))
     adv = gae(batch.reward, value[:-1], next_value, cut, cfg.gamma, cfg.gae_lambda)
+    check_finite(adv, "the joint advantage (GAE)", "all: it is joint")
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
 
 
@@ -411,13 +437,20 @@ def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: s
     with torch.no_grad():
         d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))[owner][:, inputs.index]
     if active is None:
-        return actors.head.kl_matrix(d, reduce)
+        return _finite_distances(actors.head.kl_matrix(d, reduce))
     # where source j did not act, every learner is given j's own distribution: KL exactly 0
     # there, which leaves a max unchanged; a mean is rescaled to the active samples below
     seat, B = torch.arange(active.shape[0]), active.shape[1]
     d = torch.where(active[None, :, :, None], d, d[seat, seat][None])
     K = actors.head.kl_matrix(d, reduce)
-    return K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy()
+    return _finite_distances(K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy())
+
+
+def _finite_distances(K: np.ndarray) -> np.ndarray:
+    bad = np.argwhere(~np.isfinite(K))
+    if len(bad):
+        raise Diverged(f"the policy distance KL K[{bad[0][0]}, {bad[0][1]}] (Eq. 9)", bad[0][0])
+    return K
 
 
 def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
@@ -440,6 +473,7 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, own
                 d_new = learner_dists(actors, batch.inputs, src)[src.own]
                 factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
                                        None if src.active is None else src.active[src.own])
+            check_finite(factor, "the sequential factor rho", net)
     return factor, objectives, trpo_kls
 
 
@@ -451,6 +485,7 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
             loss = value_loss(critic(state[idx]), v_old[idx], target[idx], cfg.clip)
+            check_finite(loss, "the value loss", "critic")
             opt.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.max_grad_norm)
@@ -513,11 +548,25 @@ def _check_resumable(cfg: TrainConfig, ck: dict) -> None:
                          "or use another out_dir or resume=False")
 
 
+def _diverged_at(err: Diverged, iteration: int, cfg: TrainConfig, out: Path, owner: list[int],
+                 agents: list[str]) -> Diverged:
+    """``err`` told with the iteration, the seats of the learner (a net index) and the checkpoint."""
+    learner = err.learner
+    if isinstance(learner, int):
+        learner = f"{learner} (seats {[agents[k] for k in range(len(owner)) if owner[k] == learner]})"
+    path = out / "checkpoint.pt"
+    last = (f"the last good checkpoint {path} (iteration {load_checkpoint(out)['iteration']}) is left as it was"
+            if path.exists() else "no checkpoint had been written yet")
+    return Diverged(err.quantity, learner, f"iteration {iteration} of {cfg.algo} seed {cfg.seed}: ",
+                    f"; the run stopped and {last}")
+
+
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
           callback: Callable[[dict], None] | None = None) -> pd.DataFrame:
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
-    With ``resume``, continue from ``out_dir/checkpoint.pt`` if present; the result is then
+    ``results.csv`` is written with every checkpoint. With ``resume``, continue from
+    ``out_dir/checkpoint.pt`` if present; the result is then
     identical to an uninterrupted run. ``callback(metrics)`` is called after every iteration.
     ``result.attrs``: ``history`` (per-iteration metrics) and ``timing`` (seconds in env
     stepping, policy forwards during rollouts, learning and evaluation).
@@ -554,10 +603,10 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
     actors = Actors(n_nets, env.obs_dim, env.n_actions, cfg.hidden, getattr(env, "continuous", False), init_gen)
     critic, value_norm = Critic(env.state_dim, cfg.hidden, init_gen), ValueNorm()
     # one optimiser per net: Adam would move a net that got no gradient through its momentum;
-    # trust-region algorithms step by hand
-    actor_opts = [] if spec.trust_region else [torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5)
+    # trust-region algorithms step by hand. foreach: the same per-tensor kernels, looped in C++
+    actor_opts = [] if spec.trust_region else [torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5, foreach=True)
                                                for k in range(n_nets)]
-    critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
+    critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr, eps=1e-5, foreach=True)
     learner = A2CLearner(cfg, env, actors, init_gen) if spec.a2c else None  # SEAC / SePS
     owner = owner if learner is None else learner.owner
     act_gen = torch.Generator().manual_seed(_seed(cfg.seed, 1))
@@ -597,7 +646,6 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         ret, success = evaluate(actors, owner, eval_env, gen, cfg.max_steps)
         rows.append({**config_cols, "git_rev": revision, "iteration": it, "step": it * batch_size,
                      "eval_return": ret, "frac_opt": ret / optimum, "eval_success": success, **metrics})
-        atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
         clock["eval"] += time.perf_counter() - tic
 
     if start == 0:
@@ -611,14 +659,17 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
             owner = learner.owner  # SePS regroups once its pre-training ends
             clock["learn"] += time.perf_counter() - tic
         else:
-            adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
-            K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
-            M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
-            W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
-            W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
-            order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
-            _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
-            critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
+            try:
+                adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
+                K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
+                M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
+                W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
+                W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
+                order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
+                _, objectives, trpo_kls = update_actors(actors, actor_opts, batch, W, owner, order, adv, spec, cfg, rng)
+                critic_loss = update_critic(critic, critic_opt, value_norm, batch.state[:-1], v_old, returns, cfg, rng)
+            except Diverged as err:
+                raise _diverged_at(err, it + 1, cfg, out, owner, env.agents) from None
             clock["learn"] += time.perf_counter() - tic
 
             accepted = [k for k in trpo_kls if not math.isnan(k)]
@@ -639,6 +690,9 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                   "act_gen": act_gen.get_state(), "torch_rng": torch.get_rng_state(),
                   "np_rng": rng.bit_generator.state, "env": env.get_state(), "step": step,
                   "history": history, "rows": rows, **({} if learner is None else {"a2c": learner.state_dict()})}
+            # results.csv goes with the checkpoint, so the two always agree (and rewriting the
+            # growing CSV at every evaluation cost a tenth of a paper-budget run)
+            atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
             atomic_write(lambda p: torch.save(ck, p), out / "checkpoint.pt")
         if callback is not None:
             callback(history[-1])

@@ -2,7 +2,8 @@
 
 An engine is a module with ``check(name)`` (raise ``ValueError`` naming the allowed names;
 cheap, without importing the engine itself) and ``make_vec(name, n_envs, seed, max_steps)``
-(a vector env with the ``VecStep`` interface of ``core.VecMaze``). Engines are imported only
+(a vector env with the ``VecStep`` interface of ``core.VecMaze``; the arrays of a step may be
+overwritten by the next step, the training loop copies what it keeps). Engines are imported only
 when used, so a user without, say, JAX still trains on the mazes.
 """
 from __future__ import annotations
@@ -43,5 +44,5 @@ def check(spec: str) -> None:
 def make_vec(spec: str, n_envs: int, seed: int, max_steps: int):
     prefix, name = split(spec)
     if prefix is None:
-        return make_maze_vec(name, n_envs, max_steps)
+        return make_maze_vec(name, n_envs, max_steps, copy=False)
     return _engine(prefix).make_vec(name, n_envs, seed, max_steps)
