@@ -1,4 +1,4 @@
-"""Experiments of Section 6.1: budgets, the runs behind each figure, and a run cache.
+"""Experiments of Section 6: budgets, the runs behind each figure, and a run cache.
 
 A figure is a list of (label, TrainConfig). Every run's evaluation rows are written to
 ``<data>/runs/<run id>.csv`` atomically once the run has finished, so a reproduction that
@@ -35,6 +35,10 @@ BUDGETS = {
     "smoke": Budget(seeds=(0,), steps=3_200, eval_every=1, eval_episodes=8),
     "paper": Budget(seeds=(0, 1, 2, 3, 4), steps=240_000, eval_every=2, eval_episodes=32),
 }
+BUDGETS["cpu"] = BUDGETS["paper"]  # the mazes' paper scale fits a CPU (same runs, same cache)
+# The budget whose figures are committed: the mazes run at the paper's scale on a CPU; the
+# real engines' committed figures come from the ``cpu`` budget (see SMAX_BUDGETS).
+COMMITTED = ("paper", "cpu")
 
 
 def get_budget(name: str) -> Budget:
@@ -44,13 +48,13 @@ def get_budget(name: str) -> Budget:
 
 
 def figures_dir(budget: str) -> Path:
-    """The paper budget's figures are the committed ones; others go to a side folder.
+    """The committed budgets' figures are the committed ones; others go to a side folder.
 
     ``OAPO_FIGURES`` moves the whole tree elsewhere (the timing benchmark uses it so as not
     to touch the committed results).
     """
     root = Path(os.environ.get("OAPO_FIGURES", ROOT / "figures"))
-    return root if budget == "paper" else root / budget
+    return root if budget in COMMITTED else root / budget
 
 
 def data_dir(budget: str) -> Path:
@@ -66,7 +70,46 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
 
 
+# Fig. 4 (Section 6.2) on SMAX. Settings per map that every budget shares: HARL's tuned SMAC
+# settings (ANCHORS.md) on the paper's maps, TrainConfig's (HARL's defaults) on the small ones.
+# 64 copies x 50 steps is HARL's batch of 20 threads x 160 steps (3,200 transitions).
+SMAX_ALGOS = ("oappo", "oatrpo", "mappo", "happo")  # the SEAC branch adds "seac", "seps" here
+SMAX_BATCH = dict(n_envs=64, rollout_len=50, max_steps=100, eval_episodes=64, checkpoint_every=10)
+_PAPER_MAP = dict(gamma=0.95, hidden=(64, 64, 64))
+SMAX_MAPS = {
+    "3m": {},
+    "2s3z": {},
+    "6h_vs_8z": dict(_PAPER_MAP, clip=0.05, ppo_epochs=10, n_minibatch=2, kl_threshold=0.001),
+    "3s5z_vs_3s6z": dict(_PAPER_MAP, clip=0.1, ppo_epochs=5, n_minibatch=2, kl_threshold=0.005),
+    "MMM2_like_7m2M_vs_8m3M": dict(_PAPER_MAP, clip=0.2, ppo_epochs=5, n_minibatch=1, kl_threshold=0.06),
+}
+# budget -> map -> (seeds, env steps per run, iterations between evaluations). ``cpu``: what
+# fits in 2 hours on 2 cores (speeds measured in benchmarks/smax_speed.py); ``paper``: the
+# paper's steps per map (HARL's tuned SMAC runs), for a GPU machine or a cluster.
+SMAX_BUDGETS = {
+    "smoke": {"3m": (1, 6_400, 1)},
+    "cpu": {"3m": (5, 300_000, 10), "2s3z": (5, 500_000, 10), "6h_vs_8z": (3, 100_000, 5),
+            "3s5z_vs_3s6z": (3, 100_000, 5), "MMM2_like_7m2M_vs_8m3M": (3, 100_000, 5)},
+    "paper": {"3m": (5, 2_000_000, 25), "2s3z": (5, 5_000_000, 25), "6h_vs_8z": (5, 40_000_000, 25),
+              "3s5z_vs_3s6z": (5, 20_000_000, 25), "MMM2_like_7m2M_vs_8m3M": (5, 20_000_000, 25)},
+}
+
+
+def smax_runs(budget: str) -> list[tuple[str, TrainConfig]]:
+    """Fig. 4's grid: every algorithm on every map of the budget, seeds outermost, so a
+    budget run in pieces has every curve at a few seeds before any at many."""
+    if budget not in SMAX_BUDGETS:
+        raise ValueError(f"unknown budget {budget!r} for SMAX; choose from {sorted(SMAX_BUDGETS)}")
+    table = SMAX_BUDGETS[budget]
+    return [(algo, TrainConfig(algo=algo, env=f"smax:{m}", seed=s, steps=steps, eval_every=every,
+                               **SMAX_BATCH, **SMAX_MAPS[m]))
+            for s in range(max(n for n, _, _ in table.values()))
+            for m, (n, steps, every) in table.items() if s < n for algo in SMAX_ALGOS]
+
+
 def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
+    if figure == "fig4_smax":
+        return smax_runs(budget)
     b = get_budget(budget)
 
     def cfg(**kw) -> TrainConfig:
@@ -88,7 +131,12 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
     return [(label, cfg(seed=s, **kw)) for label, kw in grids[figure] for s in seeds]
 
 
-FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")
+FIGURES = ("fig3b", "fig3c", "fig3d", "fig5b", "fig1")  # the mazes: Section 6.1
+
+
+def figures_for(budget: str) -> tuple[str, ...]:
+    """Every figure that has runs at ``budget``."""
+    return (FIGURES if budget in BUDGETS else ()) + (("fig4_smax",) if budget in SMAX_BUDGETS else ())
 
 
 def run_id(cfg: TrainConfig) -> str:
@@ -99,7 +147,8 @@ def run_id(cfg: TrainConfig) -> str:
     defaults = TrainConfig().flat()
     changed = {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
     blob = json.dumps(changed, sort_keys=True, default=str)
-    return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+    env = cfg.env.replace(":", "-")  # "smax:3m": no colon in file names
+    return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
@@ -149,14 +198,23 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
     return RunCount(done=len(missing), cached=len(todo) - len(missing))
 
 
+def missing_runs(figure: str, budget: str) -> list[TrainConfig]:
+    """The runs of ``figure`` at ``budget`` that are not on disk yet."""
+    return [cfg for _, cfg in figure_runs(figure, budget) if not run_path(cfg, budget).exists()]
+
+
 def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked)."""
+    """The tidy rows of one figure: training its missing runs first if ``run_missing``,
+    otherwise only the runs on disk (``missing_runs`` names the others)."""
     if run_missing:
         run_all(budget, figures=(figure,), progress=False)
     frames = []
     for label, cfg in figure_runs(figure, budget):
-        df = pd.read_csv(run_path(cfg, budget))
-        frames.append(df.assign(label=label, figure=figure))
+        if run_path(cfg, budget).exists():
+            frames.append(pd.read_csv(run_path(cfg, budget)).assign(label=label, figure=figure))
+    if not frames:
+        raise FileNotFoundError(f"no run of {figure} at budget {budget!r} is on disk; train them with "
+                                f"run_all({budget!r}, figures=({figure!r},)) or load_figure(..., run_missing=True)")
     df = pd.concat(frames, ignore_index=True)
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
     revisions = sorted(df["git_rev"].astype(str).unique())

@@ -51,17 +51,20 @@ def main(argv: list[str] | None = None) -> int:
     from oapo_lite import experiments
 
     parser = argparse.ArgumentParser(prog="python -m oapo_lite reproduce", description=__doc__)
-    parser.add_argument("--budget", default="smoke", help=f"one of {sorted(experiments.BUDGETS)}")
+    parser.add_argument("--budget", default="smoke",
+                        help=f"one of {sorted(set(experiments.BUDGETS) | set(experiments.SMAX_BUDGETS))}")
     parser.add_argument("--inplace", action="store_true",
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
                         help="CI mode: no progress bars")
     parser.add_argument("--workers", type=int, default=2, help="parallel training processes")
     args = parser.parse_args(argv)
-    experiments.get_budget(args.budget)  # fail fast on a bad name
+    if not experiments.figures_for(args.budget):  # fail fast on a bad name
+        experiments.get_budget(args.budget)
 
     start = time.perf_counter()
-    runs = experiments.run_all(args.budget, workers=args.workers, progress=not args.check)
+    runs = experiments.run_all(args.budget, figures=experiments.figures_for(args.budget), workers=args.workers,
+                               progress=not args.check)
     timings = run_notebooks(args.budget, args.inplace)
     print("\nSummary")
     print(f"  experiment runs: {runs.done} trained, {runs.cached} already on disk")

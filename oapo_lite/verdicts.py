@@ -2,7 +2,8 @@
 
 Input: one row per (run, evaluation point) with columns ``label`` (the curve: an
 algorithm, a sigma, a scheme...), ``seed``, ``step`` (env steps) and ``frac_opt`` (return
-as a fraction of the oracle optimum). A run is one (label, seed).
+as a fraction of the oracle optimum), or another measure (``Metric``: SMAX's win rate). A
+run is one (label, seed).
 
 Two numbers summarise a run: the env steps it took to first reach ``threshold`` of the
 optimum (censored at its last step if it never did), and its final fraction of the optimum
@@ -11,6 +12,9 @@ is *reproduced* when the means differ in the claimed direction by more than twic
 combined standard error over seeds (std with ddof = 1), *direction only* when they differ in
 that direction by less, and *not reproduced* otherwise. "Faster" also needs at least as many
 seeds to have reached the threshold: a censored seed never counts in a run's favour.
+A claim is *not testable at this budget* when the data cannot decide it: fewer than two
+seeds of a curve (no noise estimate), no run of either curve ever above the metric's floor
+(nothing was learned), or, for speed, neither curve ever reaching the threshold.
 """
 from __future__ import annotations
 
@@ -22,27 +26,50 @@ import pandas as pd
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
+NOT_TESTABLE = "not testable at this budget"
 
 
-def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -> pd.DataFrame:
-    """One row per run: steps to threshold (censored), whether it got there, final fraction."""
+@dataclass(frozen=True)
+class Metric:
+    """What a curve measures: its column, the level that counts as converged, the level a
+    run must exceed somewhere to count as having learned anything, and how evidence names
+    reaching the threshold and the final value."""
+
+    column: str
+    threshold: float
+    floor: float
+    reach: str  # formatted with the threshold
+    final: str
+
+
+FRAC_OPT = Metric("frac_opt", THRESHOLD, -np.inf, "{:.0%} of the optimum", "final fraction of the optimum")
+WIN_RATE = Metric("eval_success", 0.5, 0.05, "a {:.0%} win rate", "final win rate")
+
+
+def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
+    """One row per run: steps to threshold (censored), whether it got there, final value of
+    ``y`` (column ``final_frac``), its peak, and its largest drop below an earlier peak."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
-        hit = run.loc[run["frac_opt"] >= threshold, "step"]
+        hit = run.loc[run[y] >= threshold, "step"]
         k = max(1, int(round(tail * len(run))))
         rows.append({
             "label": label,
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
-            "final_frac": float(run["frac_opt"].iloc[-k:].mean()),
+            "final_frac": float(run[y].iloc[-k:].mean()),
+            "peak": float(run[y].max()),
+            "drawdown": float((run[y].cummax() - run[y]).max()),
         })
     return pd.DataFrame(rows)
 
 
-def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
-    """Per label: mean and std over seeds of steps-to-threshold and final fraction."""
-    runs = per_run(df, threshold)
+def summary(df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT) -> pd.DataFrame:
+    """Per label: mean and std over seeds of steps-to-threshold and final value (the per-run
+    table and the metric ride along in ``attrs``)."""
+    threshold = metric.threshold if threshold is None else threshold
+    runs = per_run(df, threshold, y=metric.column)
     g = runs.groupby("label", sort=False)
     out = pd.DataFrame({
         "seeds": g.size(),
@@ -52,6 +79,7 @@ def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
         "final_mean": g["final_frac"].mean(),
         "final_std": g["final_frac"].std(ddof=1).fillna(0.0),
     })
+    out.attrs.update(runs=runs, metric=Metric(metric.column, threshold, metric.floor, metric.reach, metric.final))
     return out
 
 
@@ -78,6 +106,10 @@ def _stderr(s: pd.DataFrame, label, col: str) -> float:
 NOISE_SE = 2.0  # a difference must exceed this many combined standard errors
 
 
+def _metric(s: pd.DataFrame) -> Metric:
+    return s.attrs.get("metric", FRAC_OPT)
+
+
 def _status(diff: float, noise: float) -> str:
     if diff > NOISE_SE * noise:
         return REPRODUCED
@@ -89,7 +121,7 @@ def faster(s: pd.DataFrame, a, b, claim: str) -> Verdict:
     diff = s.loc[b, "steps_mean"] - s.loc[a, "steps_mean"]
     noise = np.hypot(_stderr(s, a, "steps"), _stderr(s, b, "steps"))
     status = NOT if s.loc[a, "reached"] < s.loc[b, "reached"] else _status(diff, noise)
-    return Verdict(claim, status, f"steps to {THRESHOLD:.0%} of the optimum: "
+    return Verdict(claim, status, f"steps to {_metric(s).reach.format(_metric(s).threshold)}: "
                    f"{_fmt_steps(s, a)} vs {_fmt_steps(s, b)}.")
 
 
@@ -98,7 +130,7 @@ def higher(s: pd.DataFrame, a, b, claim: str) -> Verdict:
     diff = s.loc[a, "final_mean"] - s.loc[b, "final_mean"]
     noise = np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final"))
     return Verdict(claim, _status(diff, noise),
-                   f"final fraction of the optimum: {_fmt_final(s, a)} vs {_fmt_final(s, b)}.")
+                   f"{_metric(s).final}: {_fmt_final(s, a)} vs {_fmt_final(s, b)}.")
 
 
 def better(s: pd.DataFrame, a, b, claim: str) -> Verdict:
@@ -109,6 +141,16 @@ def better(s: pd.DataFrame, a, b, claim: str) -> Verdict:
         return by_final
     by_speed = faster(s, a, b, claim)
     return Verdict(claim, by_speed.status, f"{by_final.evidence[:-1]}; {by_speed.evidence}")
+
+
+def stabler(s: pd.DataFrame, a, b, claim: str) -> Verdict:
+    """Claim: ``a`` improves more steadily than ``b``: a smaller largest drop of its curve
+    below an earlier peak (mean over seeds)."""
+    dd = s.attrs["runs"].groupby("label")["drawdown"]
+    mean, se = dd.mean(), dd.std(ddof=1) / np.sqrt(dd.size())
+    return Verdict(claim, _status(mean[b] - mean[a], np.hypot(se[a], se[b])),
+                   f"largest drop below an earlier peak: {a} {mean[a]:.3f} +- {dd.std(ddof=1)[a]:.3f} vs "
+                   f"{b} {mean[b]:.3f} +- {dd.std(ddof=1)[b]:.3f}.")
 
 
 def stuck(s: pd.DataFrame, a, claim: str, threshold: float = THRESHOLD) -> Verdict:
@@ -165,9 +207,47 @@ CLAIMS = {
 }
 
 
+# Section 6.2 (Fig. 4) on SMAX, per map: (map, test, curves, claim). The paper's
+# heterogeneous maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is heterogeneous too
+# and small enough to learn on a CPU. "Everywhere" is every map of the figure.
+SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+SMAX_CLAIMS = [
+    *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
+      for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
+    ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
+    ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
+    *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
+]
+
+
+def _undecidable(s: pd.DataFrame, test, labels) -> str | None:
+    """Why the data cannot decide a claim about ``labels``, or None if it can."""
+    m, runs = _metric(s), s.attrs["runs"]
+    few = [f"{x} ({int(s.loc[x, 'seeds']) if x in s.index else 0})" for x in labels
+           if x not in s.index or s.loc[x, "seeds"] < 2]
+    if few:
+        return f"fewer than 2 seeds on disk: {', '.join(few)}."
+    if runs.loc[runs["label"].isin(labels), "peak"].max() <= m.floor:
+        return f"no run of {' or '.join(map(str, labels))} ever rose above {m.floor:g} ({m.column}): nothing learned yet."
+    if test is faster and not s.loc[list(labels), "reached"].any():
+        return f"no seed of {' or '.join(map(str, labels))} reached {m.reach.format(m.threshold)}."
+    return None
+
+
+def _check(s: pd.DataFrame, test, labels, claim: str) -> Verdict:
+    why = _undecidable(s, test, labels)
+    return Verdict(claim, NOT_TESTABLE, why) if why else test(s, *labels, claim)
+
+
 def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
     """Check every claim the paper makes about ``figure`` against that figure's data."""
+    if figure == "fig4_smax":
+        maps = df["env"].str.removeprefix("smax:")
+        return [_check(summary(df[maps == m], metric=WIN_RATE), test, labels, claim) if (maps == m).any()
+                else Verdict(claim, NOT_TESTABLE, f"no run on {m} on disk.")
+                for m, test, labels, claim in SMAX_CLAIMS]
     if figure not in CLAIMS:
-        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted(CLAIMS)}")
+        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted([*CLAIMS, 'fig4_smax'])}")
     s = summary(df)
-    return [test(s, *labels, claim) for test, labels, claim in CLAIMS[figure]]
+    return [_check(s, test, labels, claim) for test, labels, claim in CLAIMS[figure]]

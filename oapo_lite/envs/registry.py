@@ -12,7 +12,9 @@ import importlib
 from .core import make_vec as make_maze_vec
 from .maps import load_maze
 
-ENGINES: dict[str, str] = {}  # prefix -> module path
+ENGINES: dict[str, str] = {  # prefix -> module path
+    "smax": "oapo_lite.envs.smax",
+}
 
 
 def split(spec: str) -> tuple[str | None, str]:
