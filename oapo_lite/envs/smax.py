@@ -45,7 +45,7 @@ def check(name: str) -> None:
     """Raise ``ValueError`` naming the scenarios if ``name`` is not one (imports no JAX)."""
     if name not in MAPS:
         raise ValueError(f"unknown SMAX scenario {name!r}; scenarios are {list(MAPS)} "
-                         f"(the last {len(STANDINS)} are this project's stand-ins, see ASSUMPTIONS.md)")
+                         f"(this project's stand-ins, see ASSUMPTIONS.md: {list(STANDINS)})")
 
 
 def _scenario(name: str):
