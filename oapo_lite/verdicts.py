@@ -212,13 +212,13 @@ CLAIMS = {
 # and small enough to learn on a CPU. "Everywhere" is every map of the figure.
 SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
-SMAX_CLAIMS = [
+SMAX_CLAIMS = sorted([
     *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
       for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
     ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
     ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
     *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
-]
+], key=lambda c: SMAX_MAPS.index(c[0]))  # map by map (a stable sort keeps each map's order)
 
 
 def _undecidable(s: pd.DataFrame, test, labels) -> str | None:
