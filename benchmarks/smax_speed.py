@@ -74,6 +74,7 @@ def speed(map_name: str, algos: list[str], iterations: int) -> None:
     print(f"SMAX {map_name}, {base.n_envs} copies x {base.rollout_len} steps per iteration; "
           f"JAX compile (first env of the process): {env['compile_s']:.1f} s")
     print(f"bare env: {env['steps_per_s']:8.0f} env steps/s, {env['cpu_per_kstep']:.3f} CPU s per 1k steps")
+    loop(config(map_name, "happo", 1))  # warm-up: torch's first-call costs are not the loop's
     print(f"{'algo':<8} {'steps/s':>8} {'of env':>7} {'CPU s/1k':>9} {'env':>6} {'policy':>7} {'learn':>6} {'eval':>6}")
     slow = []
     for algo in algos:
