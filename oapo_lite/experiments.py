@@ -1,4 +1,4 @@
-"""Experiments: budgets, the grid of runs behind each figure (``GRID``, data), and a run cache.
+"""Experiments of Sections 6.1 and 6.2: budgets, the grid of runs behind each figure (``GRID``, data), and a run cache.
 
 A figure is a ``Figure`` entry: curves of TrainConfig settings, each trained on every seed of
 a budget. Runs are trained by an executor (``executors``: this machine's processes, or a Ray
@@ -33,6 +33,7 @@ class Budget:
     steps: int  # env steps per run
     eval_every: int  # iterations between evaluations
     eval_episodes: int
+    config: dict = field(default_factory=dict)  # further TrainConfig fields (batch shape, episode length)
 
 
 BUDGETS = {
@@ -40,6 +41,11 @@ BUDGETS = {
     "paper": Budget(seeds=(0, 1, 2, 3, 4), steps=240_000, eval_every=2, eval_episodes=32),
     "paper20": Budget(seeds=tuple(range(20)), steps=240_000, eval_every=2, eval_episodes=32),
 }
+# "cpu": the largest budget this machine (2 cores) can honestly run. The mazes' paper scale
+# fits a CPU, so for them it is the paper budget (same runs, same cache); the real engines
+# override it per figure (``Figure.budgets``) with what fits in one or two hours.
+BUDGETS["cpu"] = BUDGETS["paper"]
+COMMITTED = ("paper", "cpu")  # the budgets whose figures and runs are committed under figures/
 
 
 def get_budget(name: str) -> Budget:
@@ -49,13 +55,13 @@ def get_budget(name: str) -> Budget:
 
 
 def figures_dir(budget: str) -> Path:
-    """The paper budget's figures are the committed ones; others go to a side folder.
+    """The committed budgets' figures live in figures/; others go to a side folder.
 
     ``OAPO_FIGURES`` moves the whole tree elsewhere (the timing benchmark uses it so as not
     to touch the committed results).
     """
     root = Path(os.environ.get("OAPO_FIGURES", ROOT / "figures"))
-    return root if budget == "paper" else root / budget
+    return root if budget in COMMITTED else root / budget
 
 
 def data_dir(budget: str) -> Path:
@@ -86,8 +92,10 @@ class Figure:
     ``curves``: (label, TrainConfig fields of that curve); ``common``: fields every curve shares
     (env, batch shape, ...); ``seeds``: how many of the budget's seeds (None: all);
     ``budgets``: per-budget overrides of ``Budget`` fields for this figure (a real engine needs
-    more env steps than a maze), e.g. ``{"paper": {"steps": 10_000_000}}``; ``cpus``, ``gpus``,
-    ``memory_gb``: what one run asks a Ray cluster for.
+    more env steps than a maze), e.g. ``{"paper": {"steps": 10_000_000}}``; under the key
+    ``envs``, overrides for one env alone, and then only the curves on those envs run at that
+    budget; ``runs_at``: the budgets the figure has runs at (None: every budget); ``cpus``,
+    ``gpus``, ``memory_gb``: what one run asks a Ray cluster for.
     """
 
     id: str
@@ -95,13 +103,51 @@ class Figure:
     common: dict = field(default_factory=dict)
     seeds: int | None = None
     budgets: dict = field(default_factory=dict)
+    runs_at: tuple[str, ...] | None = None
     cpus: float = 1.0
     gpus: float = 0.0
     memory_gb: float = 0.0
 
-    def budget(self, name: str) -> Budget:
-        return replace(get_budget(name), **self.budgets.get(name, {}))
+    def budget(self, name: str, env: str | None = None) -> Budget:
+        """This figure's budget ``name`` (for the curves on ``env``, if it has its own)."""
+        own = dict(self.budgets.get(name, {}))
+        envs = own.pop("envs", {})
+        return replace(get_budget(name), **own, **envs.get(env, {}))
 
+    def envs(self, name: str) -> tuple[str, ...] | None:
+        """The envs this figure runs at budget ``name`` (None: every curve's)."""
+        envs = self.budgets.get(name, {}).get("envs")
+        return None if envs is None else tuple(envs)
+
+
+# Fig. 4 (Section 6.2) on SMAX. Per-map settings every budget shares: HARL's tuned SMAC settings
+# (ANCHORS.md) on the paper's maps, TrainConfig's (HARL's defaults) on the small ones. 64 copies
+# x 50 steps is HARL's batch of 20 threads x 160 steps (3,200 transitions).
+SMAX_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
+SMAX_BATCH = dict(n_envs=64, rollout_len=50, max_steps=100, checkpoint_every=10)
+_PAPER_MAP = dict(gamma=0.95, hidden=(64, 64, 64))
+SMAX_MAPS = {
+    "3m": {},
+    "2s3z": {},
+    "6h_vs_8z": dict(_PAPER_MAP, clip=0.05, ppo_epochs=10, n_minibatch=2, kl_threshold=0.001),
+    "3s5z_vs_3s6z": dict(_PAPER_MAP, clip=0.1, ppo_epochs=5, n_minibatch=2, kl_threshold=0.005),
+    "MMM2_like_7m2M_vs_8m3M": dict(_PAPER_MAP, clip=0.2, ppo_epochs=5, n_minibatch=1, kl_threshold=0.06),
+}
+
+
+def _smax(m: str, **budget) -> tuple[str, dict]:
+    return f"smax:{m}", budget
+
+
+# App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO) and
+# direct reuse (SEAC) on homogeneous agents.
+FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
+# Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
+FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
+GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
+# HARL's tuned GRF settings (ANCHORS.md); the engine itself ends academy episodes (<= 400 steps)
+GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_steps=400)
+ENGINE_BUDGETS = ("smoke", "cpu", "paper")
 
 # Every figure the project reproduces; a new figure is a new entry here.
 GRID = (
@@ -116,6 +162,43 @@ GRID = (
     Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
     # label: the algorithm; the maze is the ``env`` column
     Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
+    # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
+    # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
+    # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).
+    Figure("fig4_smax", tuple((a, dict(algo=a, env=f"smax:{m}", **kw)) for m, kw in SMAX_MAPS.items()
+                              for a in SMAX_ALGOS),
+           common=SMAX_BATCH, runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(eval_episodes=8, envs=dict([_smax("3m", steps=6_400, eval_every=1)])),
+               "cpu": dict(eval_episodes=64, envs=dict([_smax("3m", steps=300_000, eval_every=10),
+                                                        _smax("2s3z", steps=500_000, eval_every=10)])),
+               "paper": dict(eval_episodes=64, eval_every=25, envs=dict([
+                   _smax("3m", steps=2_000_000), _smax("2s3z", steps=5_000_000),
+                   _smax("6h_vs_8z", steps=40_000_000), _smax("3s5z_vs_3s6z", steps=20_000_000),
+                   _smax("MMM2_like_7m2M_vs_8m3M", steps=20_000_000)])),
+           }),
+    # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
+    Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env="mamujoco:HalfCheetah-2x3"),
+           runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100)),
+               "cpu": dict(steps=200_000, eval_every=5, eval_episodes=3,
+                           config=dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)),
+               "paper": dict(steps=10_000_000, eval_every=25, eval_episodes=10,
+                             config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
+           }),
+    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: at the engine's ~300
+    # steps/s per core, 3_vs_1_with_keeper alone (the scenario HARL learns fastest) fits.
+    Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
+           runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(steps=64, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
+                             envs={"grf:academy_3_vs_1_with_keeper": {}}),
+               "cpu": dict(seeds=(0, 1, 2), steps=96_000, eval_every=5, eval_episodes=16,
+                           config=dict(GRF_HARL, n_envs=8, rollout_len=200),
+                           envs={"grf:academy_3_vs_1_with_keeper": {}}),
+               "paper": dict(steps=25_000_000, eval_every=25, config=dict(GRF_HARL, n_envs=50, rollout_len=200),
+                             envs={f"grf:academy_{s}": {} for s in GRF_SCENARIOS[:3]}
+                             | {"grf:academy_counterattack_hard": dict(
+                                 steps=50_000_000, config=dict(GRF_HARL, n_envs=50, rollout_len=1000))}),
+           }),
 )
 FIGURES = tuple(f.id for f in GRID)
 
@@ -144,22 +227,33 @@ class Run:
 def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
     """A figure's runs at a budget: curve by curve, seed by seed."""
     fig = get_figure(figure)
-    b = fig.budget(budget)
-    seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
-    return [Run(fig.id, label, _config(b, seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
-            for label, kw in fig.curves for s in seeds]
+    get_budget(budget)  # a bad name fails here, even for a figure without runs at it
+    if fig.runs_at is not None and budget not in fig.runs_at:
+        return []
+    envs, runs = fig.envs(budget), []
+    for label, kw in fig.curves:
+        env = {**fig.common, **kw}.get("env", TrainConfig.env)
+        if envs is not None and env not in envs:
+            continue
+        b = fig.budget(budget, env)
+        seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
+        runs += [Run(fig.id, label, _config(b, seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
+                 for s in seeds]
+    return runs
 
 
 def _config(b: Budget, **kw) -> TrainConfig:
     """A run's config at budget ``b``; A2C runs are evaluated and checkpointed at the same env
     steps as the PPO family's (see ``A2C_ENVS``)."""
+    kw = {**b.config, **kw}
     if kw["algo"] not in A2C_ALGOS:
         return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
-    ratio = (TrainConfig.n_envs * TrainConfig.rollout_len) // (A2C_ENVS * TrainConfig.n_step)
+    batch = kw.get("n_envs", TrainConfig.n_envs) * kw.get("rollout_len", TrainConfig.rollout_len)
+    ratio = max(1, batch // (A2C_ENVS * TrainConfig.n_step))
     if kw["algo"] == "seps":
         kw["seps_pretrain_steps"] = b.steps // 10
-    return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes,
-                       n_envs=A2C_ENVS, checkpoint_every=TrainConfig.checkpoint_every * ratio, **kw)
+    kw |= dict(n_envs=A2C_ENVS, checkpoint_every=kw.get("checkpoint_every", TrainConfig.checkpoint_every) * ratio)
+    return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes, **kw)
 
 
 def figure_runs(figure: "Figure | str", budget: str) -> list[tuple[object, TrainConfig]]:
@@ -179,7 +273,8 @@ def run_id(cfg: TrainConfig) -> str:
     a new field is added with a default that reproduces the old behaviour; changing an existing
     default, on the other hand, must come with a new cache (delete ``runs/``)."""
     blob = json.dumps(_changed(cfg), sort_keys=True, default=str)
-    return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+    env = cfg.env.replace(":", "_")  # an engine's env spec ("smax:3m") as a portable file name
+    return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
@@ -211,6 +306,19 @@ class Failure:
                 f"  config (non-default fields): {_changed(self.run.cfg)}\n{self.error.rstrip()}")
 
 
+def _engine_installed(run: Run) -> bool:
+    """False (and says so, once per engine) for a run whose engine is not installed here."""
+    engine = env_registry.split(run.cfg.env)[0]
+    hint = env_registry.missing_engine(engine) if engine and run.cfg.env_fn is None else None
+    if hint and engine not in _SKIPPED:
+        _SKIPPED.add(engine)
+        print(f"skipping the {engine} runs: {hint}", file=sys.stderr)
+    return hint is None
+
+
+_SKIPPED: set[str] = set()
+
+
 def _cost(cfg: TrainConfig) -> int:
     maze = cfg.env_fn is None and env_registry.split(cfg.env)[0] is None
     return cfg.steps * (load_maze(cfg.env).n_agents if maze else 1)
@@ -236,10 +344,12 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
-    todo = grid_runs(budget, figures)
-    # longest first (steps x agents), so that no long run starts last while the other worker idles
-    missing = sorted((r for r in todo if not run_path(r.cfg, budget).exists()), key=lambda r: _cost(r.cfg),
-                     reverse=True)
+    todo = [r for r in grid_runs(budget, figures) if _engine_installed(r)]
+    # seed by seed, so that an interrupted grid has every curve at a few seeds before any at many;
+    # within a seed longest first (steps x agents), so that no long run starts last while the
+    # other worker idles
+    missing = sorted((r for r in todo if not run_path(r.cfg, budget).exists()),
+                     key=lambda r: (r.cfg.seed, -_cost(r.cfg)))
     checkpoints = data_dir(budget) / "checkpoints"
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
@@ -261,9 +371,15 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
 
 
+def missing_runs(figure: str, budget: str) -> list[Run]:
+    """The runs of ``figure`` at ``budget`` that are not on disk yet."""
+    return [r for r in runs_of(figure, budget) if not run_path(r.cfg, budget).exists()]
+
+
 def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing: bool = False) -> pd.DataFrame:
     """The tidy rows of one figure (training its missing runs first, if asked; or, with
-    ``skip_missing``, leaving out the runs not on disk and naming them)."""
+    ``skip_missing``, leaving out the runs not on disk: ``missing_runs`` names them, and with
+    none on disk the frame is empty and no CSV is written)."""
     if run_missing:
         failed = run_all(budget, figures=(figure,), progress=False).failed
         if failed:
@@ -275,11 +391,13 @@ def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing
             continue
         df = pd.read_csv(run_path(cfg, budget))
         frames.append(df.assign(label=label, figure=figure))
+    if not frames:
+        return pd.DataFrame()
     df = pd.concat(frames, ignore_index=True)
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
     if missing:
-        print(f"warning: {figure} leaves out {len(missing)} runs not on disk: {missing}")
+        print(f"warning: {figure} at budget {budget!r} leaves out {len(missing)} runs not on disk (missing_runs)")
     revisions = sorted(df["git_rev"].astype(str).unique())
     if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
-        print(f"warning: {figure} mixes runs from git revisions {revisions}")
+        print(f"warning: {figure} mixes runs from git revisions {[r[:7] for r in revisions]}")
     return df

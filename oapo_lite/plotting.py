@@ -8,8 +8,9 @@ import pandas as pd
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
 
 
-def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt"):
-    """Fig. 3b-d: mean over seeds (line) and standard deviation (band) against env steps."""
+def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt",
+                    ylabel="return / oracle optimum"):
+    """Fig. 3b-d and 4: mean over seeds (line) and standard deviation (band) against env steps."""
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     for label in order:
@@ -18,7 +19,7 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
         line, = ax.plot(mean.index, mean.values, label=str(label))
         ax.fill_between(mean.index, mean - std, mean + std, color=line.get_color(), alpha=0.2)
     ax.axhline(1.0, color="grey", ls="--", lw=1)
-    ax.set(xlabel="environment steps", ylabel="return / oracle optimum", title=title)
+    ax.set(xlabel="environment steps", ylabel=ylabel, title=title)
     ax.legend(frameon=False)
     return ax
 

@@ -2,7 +2,8 @@
 
 Input: one row per (run, evaluation point) with columns ``label`` (the curve: an
 algorithm, a sigma, a scheme...), ``seed``, ``step`` (env steps) and ``frac_opt`` (return
-as a fraction of the oracle optimum). A run is one (label, seed).
+as a fraction of the oracle optimum), or another measure where there is no oracle (a
+``Metric``: SMAX's win rate, MaMuJoCo's return). A run is one (label, seed).
 
 Two numbers summarise a run: the env steps it took to first reach ``threshold`` of the
 optimum (censored at its last step if it never did), and its final fraction of the optimum
@@ -28,6 +29,10 @@ The decision rule (``status``) reads the intervals:
 never counts in a run's favour. The former rule is kept as ``se_status``: a difference of
 means in the claimed direction larger than twice the combined standard error over seeds
 (std with ddof = 1) is reproduced, a smaller one direction only.
+
+A claim is *not testable at this budget* when the data cannot decide it: fewer than two seeds
+of a curve, no run of its curves ever above the metric's floor (nothing was learned), or, for
+speed, no seed of either curve reaching the threshold.
 """
 from __future__ import annotations
 
@@ -40,24 +45,48 @@ from scipy import stats
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
+NOT_TESTABLE = "not testable at this budget"
 CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
 SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
-METRICS = {"steps": "steps_to_threshold", "final": "final_frac"}
+# per-run numbers a verdict reads; "steps" and "drawdown" are better when lower
+METRICS = {"steps": "steps_to_threshold", "final": "final_frac", "drawdown": "drawdown"}
 
 
-def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -> pd.DataFrame:
-    """One row per run: steps to threshold (censored), whether it got there, final fraction."""
+@dataclass(frozen=True)
+class Metric:
+    """What a curve measures: its column, the level that counts as converged, the level a run
+    must exceed somewhere to count as having learned anything, and how evidence names reaching
+    the threshold (formatted with it) and the final value."""
+
+    column: str
+    threshold: float
+    floor: float
+    reach: str
+    final: str
+
+
+FRAC_OPT = Metric("frac_opt", THRESHOLD, -np.inf, "{:.0%} of the optimum", "final fraction of the optimum")
+WIN_RATE = Metric("eval_success", 0.5, 0.05, "a {:.0%} win rate", "final win rate")
+RETURN = Metric("eval_return", np.inf, -np.inf, "return {:g}", "final evaluation return")
+FIGURE_METRICS = {"fig4_smax": WIN_RATE, "figA_mamujoco": RETURN}  # the others: FRAC_OPT
+
+
+def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
+    """One row per run: steps to threshold (censored), whether it got there, final value of
+    ``y`` (column ``final_frac``), its peak, and its largest drop below an earlier peak."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
-        hit = run.loc[run["frac_opt"] >= threshold, "step"]
+        hit = run.loc[run[y] >= threshold, "step"]
         k = max(1, int(round(tail * len(run))))
         rows.append({
             "label": label,
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
-            "final_frac": float(run["frac_opt"].iloc[-k:].mean()),
+            "final_frac": float(run[y].iloc[-k:].mean()),
+            "peak": float(run[y].max()),
+            "drawdown": float((run[y].cummax() - run[y]).max()),
         })
     return pd.DataFrame(rows)
 
@@ -74,9 +103,9 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     })
 
 
-def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
-    """Per label: mean and std over seeds of steps-to-threshold and final fraction."""
-    return _summary_of(per_run(df, threshold))
+def summary(df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT) -> pd.DataFrame:
+    """Per label: mean and std over seeds of steps-to-threshold and final value."""
+    return _summary_of(per_run(df, metric.threshold if threshold is None else threshold, y=metric.column))
 
 
 # --- interval estimates -------------------------------------------------------------------
@@ -134,13 +163,14 @@ def bootstrap_interval(statistic, *samples, confidence: float = CONFIDENCE,
 class Evidence:
     """One figure's runs and the per-curve numbers every verdict reads."""
 
-    def __init__(self, df: pd.DataFrame, threshold: float = THRESHOLD):
-        self.threshold = threshold
-        self.runs = per_run(df, threshold)
+    def __init__(self, df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT):
+        self.threshold = metric.threshold if threshold is None else threshold
+        self.metric = metric
+        self.runs = per_run(df, self.threshold, y=metric.column)
         self.summary = _summary_of(self.runs)
 
     def values(self, label, metric: str) -> np.ndarray:
-        """Per-seed values of ``metric`` ("steps" or "final") for one curve."""
+        """Per-seed values of ``metric`` (a key of ``METRICS``) for one curve."""
         if metric not in METRICS:
             raise ValueError(f"unknown metric {metric!r}; choose from {sorted(METRICS)}")
         if label not in self.summary.index:
@@ -152,19 +182,20 @@ class Evidence:
         return bootstrap_interval(iqm, self.values(label, metric))
 
     def improvement(self, a, b, metric: str) -> Interval:
-        """P(a better than b) on ``metric`` with its 95% interval; fewer steps is better."""
-        sign = -1.0 if metric == "steps" else 1.0
+        """P(a better than b) on ``metric`` with its 95% interval; fewer steps or a smaller
+        drawdown is better."""
+        sign = -1.0 if metric in ("steps", "drawdown") else 1.0
         return bootstrap_interval(probability_of_improvement, sign * self.values(a, metric),
                                   sign * self.values(b, metric))
 
 
-def intervals(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
-    """Per label: IQM over seeds of steps-to-threshold and final fraction, with 95% intervals."""
-    ev = Evidence(df, threshold)
+def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT) -> pd.DataFrame:
+    """Per label: IQM over seeds of steps-to-threshold and final value, with 95% intervals."""
+    ev = Evidence(df, threshold, metric)
     rows = {}
     for label in ev.summary.index:
         row = {"seeds": ev.summary.loc[label, "seeds"], "reached": ev.summary.loc[label, "reached"]}
-        for metric in METRICS:
+        for metric in ("steps", "final"):
             est = ev.level(label, metric)
             row |= {f"{metric}_iqm": est.point, f"{metric}_low": est.low, f"{metric}_high": est.high}
         rows[label] = row
@@ -214,7 +245,7 @@ def _above(est: Interval, value: float) -> str:
 def _pairwise(ev: Evidence, a, b, metric: str, claim: str, se_diff: float, se_noise: float,
               evidence: str, veto: bool = False) -> Verdict:
     p = ev.improvement(a, b, metric)
-    word = "faster" if metric == "steps" else "higher"
+    word = {"steps": "faster", "final": "higher", "drawdown": "steadier"}[metric]
     return Verdict(claim, NOT if veto else _above(p, 0.5), NOT if veto else _se_status(se_diff, se_noise),
                    f"{evidence}; P({a} {word}) = {p.fmt()}.", f"P({a} {word}) {p.fmt()}")
 
@@ -225,7 +256,7 @@ def faster(ev: Evidence, a, b, claim: str) -> Verdict:
     return _pairwise(ev, a, b, "steps", claim,
                      se_diff=s.loc[b, "steps_mean"] - s.loc[a, "steps_mean"],
                      se_noise=np.hypot(_stderr(s, a, "steps"), _stderr(s, b, "steps")),
-                     evidence=f"steps to {ev.threshold:.0%} of the optimum, IQM [95% CI] over seeds: "
+                     evidence=f"steps to {ev.metric.reach.format(ev.threshold)}, IQM [95% CI] over seeds: "
                               f"{_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}",
                      veto=s.loc[a, "reached"] < s.loc[b, "reached"])
 
@@ -236,7 +267,17 @@ def higher(ev: Evidence, a, b, claim: str) -> Verdict:
     return _pairwise(ev, a, b, "final", claim,
                      se_diff=s.loc[a, "final_mean"] - s.loc[b, "final_mean"],
                      se_noise=np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final")),
-                     evidence=f"final fraction of the optimum, IQM [95% CI]: {_fmt_final(ev, a)} vs {_fmt_final(ev, b)}")
+                     evidence=f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)} vs {_fmt_final(ev, b)}")
+
+
+def stabler(ev: Evidence, a, b, claim: str) -> Verdict:
+    """Claim: ``a`` improves more steadily than ``b``: a smaller largest drop of its curve
+    below an earlier peak."""
+    dd = ev.runs.groupby("label")["drawdown"]
+    mean, se = dd.mean(), dd.std(ddof=1) / np.sqrt(dd.size())
+    return _pairwise(ev, a, b, "drawdown", claim, se_diff=mean[b] - mean[a], se_noise=np.hypot(se[a], se[b]),
+                     evidence=f"largest drop below an earlier peak, IQM [95% CI]: {a} {ev.level(a, 'drawdown').fmt()} "
+                              f"vs {b} {ev.level(b, 'drawdown').fmt()}")
 
 
 def better(ev: Evidence, a, b, claim: str) -> Verdict:
@@ -314,12 +355,62 @@ CLAIMS = {
 }
 
 
+# Section 6.2 (Fig. 4) on SMAX, per map: (map, test, curves, claim). The paper's heterogeneous
+# maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is heterogeneous too and small
+# enough to learn on a CPU. "Everywhere" is every map of the figure.
+SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+SMAX_CLAIMS = sorted([
+    *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
+      for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
+    ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
+    ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
+    *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
+], key=lambda c: SMAX_MAPS.index(c[0]))  # map by map (a stable sort keeps each map's order)
+
+# App. A (see ASSUMPTIONS.md): on homogeneous agents, reusing others' experience as it is (SEAC's
+# importance-weighted reuse; MAPPO's one network on everyone's data) ends lower than using one's
+# own (HAPPO), while OAPPO's gated reuse does not.
+CLAIMS["figA_mamujoco"] = [
+    (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
+    (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
+    (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
+    (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)"),
+]
+
+
+def _undecidable(ev: Evidence | None, test, labels) -> str | None:
+    """Why the data cannot decide a claim about ``labels``, or None if it can."""
+    s = ev.summary if ev is not None else pd.DataFrame(columns=["seeds"])
+    few = [f"{x} ({int(s.loc[x, 'seeds']) if x in s.index else 0})" for x in labels
+           if x not in s.index or s.loc[x, "seeds"] < 2]
+    if few:
+        return f"fewer than 2 seeds on disk: {', '.join(few)}."
+    m = ev.metric
+    if ev.runs.loc[ev.runs["label"].isin(labels), "peak"].max() <= m.floor:
+        return f"no run of {' or '.join(map(str, labels))} ever rose above {m.floor:g} ({m.column}): nothing learned yet."
+    if test is faster and not s.loc[list(labels), "reached"].any():
+        return f"no seed of {' or '.join(map(str, labels))} reached {m.reach.format(m.threshold)}."
+    return None
+
+
+def _check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
+    why = _undecidable(ev, test, labels)
+    return Verdict(claim, NOT_TESTABLE, NOT_TESTABLE, why, "") if why else test(ev, *labels, claim)
+
+
 def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
-    """Check every claim the paper makes about ``figure`` against that figure's data."""
+    """Check every claim the paper makes about ``figure`` against that figure's data (a claim
+    the data cannot decide is ``NOT_TESTABLE``, saying why)."""
+    metric = FIGURE_METRICS.get(figure, FRAC_OPT)
+    if figure == "fig4_smax":
+        maps = df["env"].str.removeprefix("smax:") if len(df) else pd.Series(dtype=str)
+        evidence = {m: Evidence(df[maps == m], metric=metric) for m in SMAX_MAPS if (maps == m).any()}
+        return [_check(evidence.get(m), test, labels, claim) for m, test, labels, claim in SMAX_CLAIMS]
     if figure not in CLAIMS:
-        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted(CLAIMS)}")
-    ev = Evidence(df)
-    return [test(ev, *labels, claim) for test, labels, claim in CLAIMS[figure]]
+        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted([*CLAIMS, 'fig4_smax'])}")
+    ev = Evidence(df, metric=metric) if len(df) else None
+    return [_check(ev, test, labels, claim) for test, labels, claim in CLAIMS[figure]]
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:

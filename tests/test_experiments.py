@@ -93,3 +93,43 @@ def test_bad_executor_options_name_what_is_allowed(capsys):
         assert message in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown executor 'dask'.*local"):
         experiments.run_all("smoke", executor="dask")
+
+
+
+def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_names():
+    cpu = {f: experiments.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
+    for fig, runs in cpu.items():
+        labels = {r.label for r in runs}
+        per_curve = {(r.label, r.cfg.env): 0 for r in runs}
+        for r in runs:
+            per_curve[(r.label, r.cfg.env)] += 1
+        assert 3 <= min(per_curve.values()) and max(per_curve.values()) <= 5, fig
+        assert len({experiments.run_id(r.cfg) for r in runs}) == len(runs)
+        assert all(":" not in experiments.run_id(r.cfg) for r in runs)
+        assert {"oappo", "happo", "mappo", "seac"} <= labels, fig
+    # SMAX's cpu grid: the two small maps only, with their own steps; the paper's maps at paper
+    assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {"smax:3m": 300_000, "smax:2s3z": 500_000}
+    paper = {r.cfg.env: r.cfg.steps for r in experiments.runs_of("fig4_smax", "paper")}
+    assert paper["smax:6h_vs_8z"] == 40_000_000 and len(paper) == 5
+    # A2C runs evaluate at the same env steps as the PPO family on an engine's batch shape too
+    by_algo = {r.cfg.algo: r.cfg for r in cpu["fig4_smax"] if r.cfg.env == "smax:3m" and r.cfg.seed == 0}
+    ppo, a2c = by_algo["oappo"], by_algo["seac"]
+    assert ppo.eval_every * ppo.n_envs * ppo.rollout_len == a2c.eval_every * a2c.n_envs * a2c.n_step
+    # the engine figures have no runs at the maze-only budgets, and a bad budget is named
+    assert experiments.runs_of("fig4_smax", "paper20") == []
+    with pytest.raises(ValueError, match="unknown budget 'huge'"):
+        experiments.runs_of("fig4_smax", "huge")
+
+
+def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
+    import pandas as pd
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    runs = experiments.runs_of("fig4_smax", "smoke")
+    assert experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True).empty
+    cfg = runs[0].cfg
+    fake = pd.DataFrame({"step": [0, 3200], "eval_success": [0.0, 0.5], "seed": 0, "env": cfg.env, "git_rev": "x"})
+    experiments.write_csv_atomic(fake, experiments.run_path(cfg, "smoke"))
+    df = experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True)
+    assert set(df["label"]) == {runs[0].label} and len(df) == 2
+    assert experiments.missing_runs("fig4_smax", "smoke") == runs[1:]

@@ -201,3 +201,36 @@ def test_censored_seeds_never_make_a_run_faster():
 def test_unknown_figure_raises():
     with pytest.raises(ValueError, match="fig9"):
         v.claims("fig9", curves({"a": (1, 1.0)}))
+
+
+def win_curves(spec, seeds=5, env="smax:2s3z"):
+    """spec: label -> list of win rates at evaluation points 0, 10k, 20k, ..."""
+    rows = [dict(label=label, seed=seed, env=env, step=10_000 * k, eval_success=w + 0.01 * seed)
+            for label, wins in spec.items() for seed in range(seeds) for k, w in enumerate(wins)]
+    return pd.DataFrame(rows)
+
+
+def test_stabler_compares_the_largest_drop_below_an_earlier_peak():
+    df = win_curves({"steady": [0, 0.3, 0.6, 0.8, 0.8], "shaky": [0, 0.6, 0.1, 0.7, 0.8]})
+    s = v.summary(df, metric=v.WIN_RATE)
+    runs = s.attrs["runs"].set_index("label")
+    assert runs.loc["shaky", "drawdown"].tolist() == pytest.approx([0.5] * 5)
+    assert v.stabler(s, "steady", "shaky", "x").held
+    assert v.stabler(s, "shaky", "steady", "x").status == v.NOT
+
+
+def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
+    learned = {"oappo": [0, 0.6, 0.9, 0.9], "mappo": [0, 0.1, 0.2, 0.3], "happo": [0, 0.1, 0.6, 0.7]}
+    out = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned))}
+    assert out["2s3z: OAPPO ends above MAPPO (heterogeneous agents)"].held
+    assert out["2s3z: OAPPO converges faster than HAPPO"].held
+    assert out["6h_vs_8z: OAPPO ends above MAPPO"].status == v.NOT_TESTABLE  # no run on that map
+    nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
+    assert {x.status for x in v.claims("fig4_smax", nothing)} == {v.NOT_TESTABLE}
+    one_seed = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned, seeds=1))}
+    verdict = one_seed["2s3z: OAPPO ends above HAPPO (heterogeneous agents)"]
+    assert verdict.status == v.NOT_TESTABLE and "fewer than 2 seeds" in verdict.evidence
+    never_half = win_curves({"oappo": [0, 0.2, 0.3, 0.4], "happo": [0, 0.1, 0.3, 0.3], "mappo": [0, 0.1, 0.1, 0.1]})
+    out = {x.claim: x for x in v.claims("fig4_smax", never_half)}
+    assert out["2s3z: OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
+    assert out["2s3z: OAPPO ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE

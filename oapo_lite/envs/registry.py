@@ -4,7 +4,9 @@ An engine is a module with ``check(name)`` (raise ``ValueError`` naming the allo
 cheap, without importing the engine itself) and ``make_vec(name, n_envs, seed, max_steps)``
 (a vector env with the ``VecStep`` interface of ``core.VecMaze``; the arrays of a step may be
 overwritten by the next step, the training loop copies what it keeps). Engines are imported only
-when used, so a user without, say, JAX still trains on the mazes.
+when used, so a user without, say, JAX still trains on the mazes. An engine that is optional
+(not in environment.txt) also provides ``install_hint()``: None when it is installed, else how
+to install it.
 """
 from __future__ import annotations
 
@@ -15,6 +17,9 @@ from .maps import load_maze
 
 ENGINES: dict[str, str] = {  # prefix -> module path
     "layout": "oapo_lite.envs.layouts",
+    "smax": "oapo_lite.envs.smax",
+    "mamujoco": "oapo_lite.envs.mamujoco",
+    "grf": "oapo_lite.envs.grf",
 }
 
 
@@ -30,6 +35,12 @@ def split(spec: str) -> tuple[str | None, str]:
 
 def _engine(prefix: str):
     return importlib.import_module(ENGINES[prefix])
+
+
+def missing_engine(prefix: str) -> str | None:
+    """How to install engine ``prefix`` if this Python lacks it, else None."""
+    hint = getattr(_engine(prefix), "install_hint", None)
+    return hint() if hint else None
 
 
 def check(spec: str) -> None:
