@@ -11,7 +11,7 @@ import hashlib
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -29,6 +29,7 @@ class Budget:
     steps: int  # env steps per run
     eval_every: int  # iterations between evaluations
     eval_episodes: int
+    config: dict = field(default_factory=dict)  # further TrainConfig fields (batch shape, episode length)
 
 
 BUDGETS = {
@@ -37,10 +38,24 @@ BUDGETS = {
 }
 
 
-def get_budget(name: str) -> Budget:
-    if name not in BUDGETS:
-        raise ValueError(f"unknown budget {name!r}; choose from {sorted(BUDGETS)}")
-    return BUDGETS[name]
+# Real-engine figures bring their own budgets. Their committed budget is "cpu" (at most one
+# hour on two cores); App. A's own settings are not public, so there is no "paper" budget.
+FIGURE_BUDGETS = {
+    "figA_mamujoco": {
+        "smoke": Budget(seeds=(0,), steps=200, eval_every=1, eval_episodes=2,
+                        config=dict(n_envs=2, rollout_len=50, max_steps=100)),
+        "cpu": Budget(seeds=(0, 1, 2, 3, 4), steps=200_000, eval_every=5, eval_episodes=3,
+                      config=dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)),
+    },
+}
+
+
+def get_budget(name: str, figure: str | None = None) -> Budget:
+    """The budget ``name`` of ``figure`` (its own budgets if it has any, else the maze budgets)."""
+    budgets = FIGURE_BUDGETS.get(figure, BUDGETS)
+    if name not in budgets:
+        raise ValueError(f"unknown budget {name!r}{f' for {figure}' if figure else ''}; choose from {sorted(budgets)}")
+    return budgets[name]
 
 
 def figures_dir(budget: str) -> Path:
@@ -50,7 +65,7 @@ def figures_dir(budget: str) -> Path:
     to touch the committed results).
     """
     root = Path(os.environ.get("OAPO_FIGURES", ROOT / "figures"))
-    return root if budget == "paper" else root / budget
+    return root if budget in ("paper", "cpu") else root / budget  # cpu: real-engine figures'
 
 
 def data_dir(budget: str) -> Path:
@@ -64,13 +79,16 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 # Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
 # lambda = 1 / group size (NR's learners keep everything for themselves anyway).
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
+# App. A: no reuse, full sharing, gated reuse and direct reuse on homogeneous MaMuJoCo agents
+# (add "seac" here once its branch is merged)
+FIGA_ALGOS = ("happo", "mappo", "oappo")
 
 
 def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
-    b = get_budget(budget)
+    b = get_budget(budget, figure)
 
     def cfg(**kw) -> TrainConfig:
-        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **b.config, **kw)
 
     grids = {
         "fig3b": [(a, dict(algo=a, env="black_red")) for a in ("oappo", "oatrpo", "mappo", "happo")],
@@ -81,6 +99,7 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
         "fig5b": [(s, dict(algo="oappo", env="black_blue_red", allowed=s, sigma=float("inf"),
                            lam=SCHEME_LAM[s])) for s in SCHEMES],
         "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
+        "figA_mamujoco": [(a, dict(algo=a, env="mamujoco:HalfCheetah-2x3")) for a in FIGA_ALGOS],
     }
     if figure not in grids:
         raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids)}")
@@ -99,7 +118,8 @@ def run_id(cfg: TrainConfig) -> str:
     defaults = TrainConfig().flat()
     changed = {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
     blob = json.dumps(changed, sort_keys=True, default=str)
-    return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+    env = cfg.env.replace(":", "_")  # an engine's env spec, as a portable file name
+    return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
@@ -133,7 +153,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
             if run_id(cfg) not in seen:
                 seen.add(run_id(cfg))
                 todo.append(cfg)
-    missing = [c for c in todo if not run_path(c, budget).exists()]
+    # seed by seed, so that an interrupted reproduction has every curve at some seeds
+    missing = sorted((c for c in todo if not run_path(c, budget).exists()), key=lambda c: c.seed)
     with tqdm(total=len(missing), desc=f"runs ({budget})", disable=not progress) as bar:
         if workers <= 1:
             for c in missing:
@@ -150,14 +171,23 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
 
 
 def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked)."""
+    """The tidy rows of one figure (training its missing runs first, if asked). Without
+    ``run_missing``, runs not on disk are left out and listed in ``df.attrs["missing"]``
+    as (label, seed); with none on disk the figure's CSV is not written."""
     if run_missing:
         run_all(budget, figures=(figure,), progress=False)
-    frames = []
+    frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
-        df = pd.read_csv(run_path(cfg, budget))
-        frames.append(df.assign(label=label, figure=figure))
+        if run_path(cfg, budget).exists():
+            frames.append(pd.read_csv(run_path(cfg, budget)).assign(label=label, figure=figure))
+        else:
+            missing.append((label, cfg.seed))
+    if not frames:
+        df = pd.DataFrame()
+        df.attrs["missing"] = missing
+        return df
     df = pd.concat(frames, ignore_index=True)
+    df.attrs["missing"] = missing
     write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
     revisions = sorted(df["git_rev"].astype(str).unique())
     if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
