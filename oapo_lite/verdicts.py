@@ -2,7 +2,8 @@
 
 Input: one row per (run, evaluation point) with columns ``label`` (the curve: an
 algorithm, a sigma, a scheme...), ``seed``, ``step`` (env steps) and ``frac_opt`` (return
-as a fraction of the oracle optimum). A run is one (label, seed).
+as a fraction of the oracle optimum). A run is one (label, seed). Figures without an oracle
+(the real engines) are judged on another column, ``METRIC[figure]`` (the evaluation return).
 
 Two numbers summarise a run: the env steps it took to first reach ``threshold`` of the
 optimum (censored at its last step if it never did), and its final fraction of the optimum
@@ -22,27 +23,29 @@ import pandas as pd
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
+NO_DATA = "no data yet"
+FINAL_NAMES = {"frac_opt": "final fraction of the optimum", "eval_return": "final evaluation return"}
 
 
-def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1) -> pd.DataFrame:
-    """One row per run: steps to threshold (censored), whether it got there, final fraction."""
+def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
+    """One row per run: steps to threshold (censored), whether it got there, final value of ``y``."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
-        hit = run.loc[run["frac_opt"] >= threshold, "step"]
+        hit = run.loc[run[y] >= threshold, "step"]
         k = max(1, int(round(tail * len(run))))
         rows.append({
             "label": label,
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
-            "final_frac": float(run["frac_opt"].iloc[-k:].mean()),
+            "final_frac": float(run[y].iloc[-k:].mean()),
         })
     return pd.DataFrame(rows)
 
 
-def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
-    """Per label: mean and std over seeds of steps-to-threshold and final fraction."""
-    runs = per_run(df, threshold)
+def summary(df: pd.DataFrame, threshold: float = THRESHOLD, y: str = "frac_opt") -> pd.DataFrame:
+    """Per label: mean and std over seeds of steps-to-threshold and final value of ``y``."""
+    runs = per_run(df, threshold, y=y)
     g = runs.groupby("label", sort=False)
     out = pd.DataFrame({
         "seeds": g.size(),
@@ -52,6 +55,7 @@ def summary(df: pd.DataFrame, threshold: float = THRESHOLD) -> pd.DataFrame:
         "final_mean": g["final_frac"].mean(),
         "final_std": g["final_frac"].std(ddof=1).fillna(0.0),
     })
+    out.attrs["y"] = y
     return out
 
 
@@ -98,7 +102,7 @@ def higher(s: pd.DataFrame, a, b, claim: str) -> Verdict:
     diff = s.loc[a, "final_mean"] - s.loc[b, "final_mean"]
     noise = np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final"))
     return Verdict(claim, _status(diff, noise),
-                   f"final fraction of the optimum: {_fmt_final(s, a)} vs {_fmt_final(s, b)}.")
+                   f"{FINAL_NAMES[s.attrs.get('y', 'frac_opt')]}: {_fmt_final(s, a)} vs {_fmt_final(s, b)}.")
 
 
 def better(s: pd.DataFrame, a, b, claim: str) -> Verdict:
@@ -162,12 +166,29 @@ CLAIMS = {
         (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
         (optimal, ("NR",), "NR (no reuse) reaches the optimum"),
     ],
+    # App. A (see ASSUMPTIONS.md): on homogeneous agents, reusing others' experience as it is
+    # (SEAC's importance-weighted reuse; MAPPO's one network on everyone's data) ends lower
+    # than using one's own (HAPPO), while OAPPO's gated reuse does not
+    "figA_mamujoco": [
+        (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
+        (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
+        (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
+        (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)"),
+    ],
 }
 
 
+METRIC = {"figA_mamujoco": "eval_return"}  # figures judged on something else than frac_opt
+
+
 def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
-    """Check every claim the paper makes about ``figure`` against that figure's data."""
+    """Check every claim the paper makes about ``figure`` against that figure's data; a claim
+    about a curve with no runs yet gets the status ``NO_DATA``."""
     if figure not in CLAIMS:
         raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted(CLAIMS)}")
-    s = summary(df)
-    return [test(s, *labels, claim) for test, labels, claim in CLAIMS[figure]]
+    s = summary(df, y=METRIC.get(figure, "frac_opt")) if len(df) else pd.DataFrame()
+    out = []
+    for test, labels, claim in CLAIMS[figure]:
+        absent = [label for label in labels if label not in s.index]
+        out.append(Verdict(claim, NO_DATA, f"no runs of {absent}.") if absent else test(s, *labels, claim))
+    return out

@@ -16,6 +16,8 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import os
+import sys
 
 import numpy as np
 
@@ -42,6 +44,22 @@ def check(name: str) -> None:
                          f"(homogeneous, i.e. equal spaces for reuse: {sorted(HOMOGENEOUS)})")
 
 
+@contextlib.contextmanager
+def _quiet_c_stderr():
+    """Silence file descriptor 2 for a moment: MuJoCo 4 warns from C, on every compile, that
+    gymnasium's HalfCheetah model uses the deprecated attribute 'settotalmass'; nothing a
+    user can act on, and it would interleave with notebook output."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), 2)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def env_fn(name: str, max_steps: int):
     """A factory of one MaMuJoCo ``ParallelEnv`` whose own time limit is ``max_steps``."""
     check(name)
@@ -54,15 +72,16 @@ def env_fn(name: str, max_steps: int):
     robot, partition = name.split("-")
 
     def make():
-        return mamujoco_v1.parallel_env(robot, partition, max_episode_steps=max_steps)
+        with _quiet_c_stderr():
+            return mamujoco_v1.parallel_env(robot, partition, max_episode_steps=max_steps)
 
     make.__name__ = f"mamujoco:{name}"
     return make
 
 
 class MaMuJoCoVec(PettingZooVec):
-    """``PettingZooVec`` whose checkpoints hold every copy's MuJoCo integration state, random
-    generator and time-limit counter: MaMuJoCo envs keep lambdas and cannot be pickled whole."""
+    """``PettingZooVec`` whose checkpoints hold every copy's MuJoCo data, random generator and
+    time-limit counter: MaMuJoCo envs keep lambdas and cannot be pickled whole."""
 
     def get_state(self) -> dict:
         return {"copies": [_copy_state(env) for env in self.envs], "t": self._t.copy(),
@@ -74,25 +93,21 @@ class MaMuJoCoVec(PettingZooVec):
         self._t, self._returns = d["t"].copy(), d["returns"].copy()
 
 
-def _physics(env):
-    import mujoco
-
-    limit = env.single_agent_env  # gymnasium.make puts the TimeLimit outermost
-    return mujoco, limit, limit.unwrapped, mujoco.mjtState.mjSTATE_INTEGRATION
-
-
 def _copy_state(env) -> dict:
-    mujoco, limit, sim, sig = _physics(env)
-    physics = np.empty(mujoco.mj_stateSize(sim.model, sig))
-    mujoco.mj_getState(sim.model, sim.data, physics, sig)
-    return {"physics": physics, "rng": copy.deepcopy(sim.np_random.bit_generator.state),
+    limit = env.single_agent_env  # gymnasium.make puts the TimeLimit outermost
+    sim = limit.unwrapped
+    # the whole MjData, not just qpos / qvel: rewards read quantities (body positions) that
+    # mj_step leaves one substep stale, and recomputing them would change the next reward
+    return {"data": copy.deepcopy(sim.data), "rng": copy.deepcopy(sim.np_random.bit_generator.state),
             "elapsed": limit._elapsed_steps, "agents": list(env.agents)}
 
 
 def _set_copy_state(env, state: dict) -> None:
-    mujoco, limit, sim, sig = _physics(env)
-    mujoco.mj_setState(sim.model, sim.data, state["physics"], sig)
-    mujoco.mj_forward(sim.model, sim.data)  # derived quantities (state(), observations) match again
+    import mujoco
+
+    limit = env.single_agent_env
+    sim = limit.unwrapped
+    mujoco.mj_copyData(sim.data, sim.model, state["data"])
     sim.np_random.bit_generator.state = copy.deepcopy(state["rng"])
     limit._elapsed_steps, env.agents = state["elapsed"], list(state["agents"])
 
