@@ -90,3 +90,19 @@ def test_censored_seeds_never_make_a_run_faster():
 def test_unknown_figure_raises():
     with pytest.raises(ValueError, match="fig9"):
         v.claims("fig9", curves({"a": (1, 1.0)}))
+
+
+def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data():
+    # App. A: HAPPO plateaus at 1000, MAPPO at 400 (and OAPPO at 900); SEAC has no runs
+    df = curves({"happo": (50_000, 1000.0), "mappo": (50_000, 400.0), "oappo": (50_000, 900.0)}, noise=0.1)
+    df = df.rename(columns={"frac_opt": "eval_return"}).assign(frac_opt=np.nan)
+    verdicts = {x.claim: x for x in v.claims("figA_mamujoco", df)}
+    assert verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].held
+    assert "final evaluation return: happo 1000.000" in verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].evidence
+    assert verdicts["OAPPO ends above full sharing (MAPPO)"].held
+    seac = verdicts["direct reuse (SEAC) ends below no reuse (HAPPO)"]
+    assert seac.status == v.NO_DATA and "seac" in seac.evidence and not seac.held
+    swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))
+    assert not {x.claim: x for x in v.claims("figA_mamujoco", swapped)}[
+        "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
+    assert all(x.status == v.NO_DATA for x in v.claims("figA_mamujoco", pd.DataFrame()))
