@@ -6,11 +6,13 @@ import numpy as np
 import pandas as pd
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
+YLABELS = {"frac_opt": "return / oracle optimum", "eval_return": "episode return (evaluation)",
+           "eval_success": "win rate"}
 
 
-def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt",
-                    ylabel="return / oracle optimum"):
-    """Fig. 3b-d and 4: mean over seeds (line) and standard deviation (band) against env steps."""
+def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None):
+    """Fig. 3b-d, 4, App. A: mean over seeds (line) and standard deviation (band) of ``y``
+    against env steps."""
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     for label in order:
@@ -18,8 +20,9 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
         mean, std = g.mean(), g.std(ddof=0).fillna(0.0)
         line, = ax.plot(mean.index, mean.values, label=str(label))
         ax.fill_between(mean.index, mean - std, mean + std, color=line.get_color(), alpha=0.2)
-    ax.axhline(1.0, color="grey", ls="--", lw=1)
-    ax.set(xlabel="environment steps", ylabel=ylabel, title=title)
+    if y == "frac_opt":
+        ax.axhline(1.0, color="grey", ls="--", lw=1)
+    ax.set(xlabel="environment steps", ylabel=ylabel or YLABELS.get(y, y), title=title)
     ax.legend(frameon=False)
     return ax
 

@@ -212,11 +212,11 @@ def win_curves(spec, seeds=5, env="smax:2s3z"):
 
 def test_stabler_compares_the_largest_drop_below_an_earlier_peak():
     df = win_curves({"steady": [0, 0.3, 0.6, 0.8, 0.8], "shaky": [0, 0.6, 0.1, 0.7, 0.8]})
-    s = v.summary(df, metric=v.WIN_RATE)
-    runs = s.attrs["runs"].set_index("label")
+    ev = v.Evidence(df, metric=v.WIN_RATE)
+    runs = ev.runs.set_index("label")
     assert runs.loc["shaky", "drawdown"].tolist() == pytest.approx([0.5] * 5)
-    assert v.stabler(s, "steady", "shaky", "x").held
-    assert v.stabler(s, "shaky", "steady", "x").status == v.NOT
+    assert v.stabler(ev, "steady", "shaky", "x").held
+    assert v.stabler(ev, "shaky", "steady", "x").status == v.NOT
 
 
 def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
@@ -234,3 +234,19 @@ def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     out = {x.claim: x for x in v.claims("fig4_smax", never_half)}
     assert out["2s3z: OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
     assert out["2s3z: OAPPO ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE
+
+
+def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data():
+    # App. A: HAPPO plateaus at 1000, MAPPO at 400 (and OAPPO at 900); SEAC has no runs
+    df = curves({"happo": (50_000, 1000.0), "mappo": (50_000, 400.0), "oappo": (50_000, 900.0)}, noise=0.1)
+    df = df.rename(columns={"frac_opt": "eval_return"}).assign(frac_opt=np.nan)
+    verdicts = {x.claim: x for x in v.claims("figA_mamujoco", df)}
+    assert verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].held
+    assert "final evaluation return, IQM [95% CI]: happo 1000.000" in verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].evidence
+    assert verdicts["OAPPO ends above full sharing (MAPPO)"].held
+    seac = verdicts["direct reuse (SEAC) ends below no reuse (HAPPO)"]
+    assert seac.status == v.NOT_TESTABLE and "seac (0)" in seac.evidence and not seac.held
+    swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))
+    assert not {x.claim: x for x in v.claims("figA_mamujoco", swapped)}[
+        "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
+    assert all(x.status == v.NOT_TESTABLE for x in v.claims("figA_mamujoco", pd.DataFrame()))

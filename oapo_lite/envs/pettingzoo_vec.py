@@ -18,14 +18,13 @@ from gymnasium import spaces
 from .core import VecStep
 
 
-def _flat_obs(obs, dim: int) -> tuple[np.ndarray, np.ndarray | None]:
-    """(padded flat observation, action mask or None) of one agent's raw observation."""
+def _flat_obs(obs) -> tuple[np.ndarray, np.ndarray | None]:
+    """(flat observation, action mask or None) of one agent's raw observation."""
     mask = None
     if isinstance(obs, dict) and "observation" in obs:
         mask = obs.get("action_mask")
         obs = obs["observation"]
-    flat = np.asarray(obs, dtype=np.float32).ravel()
-    return np.pad(flat, (0, dim - flat.size)), mask
+    return np.asarray(obs, dtype=np.float32).ravel(), mask
 
 
 def _obs_size(space: spaces.Space) -> int:
@@ -70,8 +69,10 @@ class PettingZooVec:
                 + ", ".join(f"{a}: {s}" for a, s in zip(self.agents, acts))
             )
         self.obs_dim = max(_obs_size(o) for o, _ in self.spaces)
-        self._has_state = self._try_state(first) is not None
-        self.state_dim = (int(np.prod(first.state_space.shape)) if self._has_state
+        state = self._try_state(first)
+        self._has_state = state is not None
+        # an env may implement state() without declaring state_space (MaMuJoCo does)
+        self.state_dim = (int(np.prod(getattr(first, "state_space", state).shape)) if self._has_state
                           else sum(_obs_size(o) for o, _ in self.spaces))
         self._t = np.zeros(self.n_envs, dtype=np.int64)
         self._returns = np.zeros(self.n_envs, dtype=np.float64)
@@ -93,7 +94,8 @@ class PettingZooVec:
                 avail[k, self.spaces[k][1].n:] = False
             if agent not in obs:
                 continue
-            o[k], mask = _flat_obs(obs[agent], self.obs_dim)
+            flat, mask = _flat_obs(obs[agent])
+            o[k, : flat.size] = flat  # the rest stays zero: padding up to the largest space
             mask = mask if mask is not None else infos.get(agent, {}).get("action_mask")
             if mask is not None and not self.continuous:
                 avail[k, : len(mask)] = np.asarray(mask, dtype=bool)
@@ -102,7 +104,7 @@ class PettingZooVec:
 
     def _concat_obs(self, obs: dict) -> np.ndarray:
         """The global state of an environment without ``state()``: every agent's raw observation."""
-        return np.concatenate([_flat_obs(obs[a], _obs_size(s))[0] if a in obs else np.zeros(_obs_size(s), np.float32)
+        return np.concatenate([_flat_obs(obs[a])[0] if a in obs else np.zeros(_obs_size(s), np.float32)
                                for a, (s, _) in zip(self.agents, self.spaces)])
 
     def _reset_copy(self, k: int, seed: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -133,7 +135,7 @@ class PettingZooVec:
             live = list(env.agents)
             obs, rew, term, trunc, infos = env.step(
                 {a: self._env_action(k, actions[e][k]) for k, a in enumerate(self.agents) if a in live})
-            team = float(np.mean([rew[a] for a in live])) if live else 0.0
+            team = sum(float(rew[a]) for a in live) / len(live) if live else 0.0
             reward[e] = team
             self._t[e] += 1
             self._returns[e] += team

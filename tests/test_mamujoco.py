@@ -1,0 +1,92 @@
+"""Multi-agent MuJoCo through the env registry: names, spaces, action bounds, resume, training."""
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from oapo_lite.envs import mamujoco, registry
+from oapo_lite.nets import Actors
+from oapo_lite.train import TrainConfig, collect, load_checkpoint, train
+
+CHEETAH = "mamujoco:HalfCheetah-2x3"
+TINY = dict(env=CHEETAH, n_envs=2, rollout_len=20, max_steps=30, eval_every=1, eval_episodes=2)
+
+
+def test_unknown_names_raise_listing_the_allowed_ones():
+    with pytest.raises(ValueError) as err:
+        TrainConfig(env="mamujoco:HalfCheetah-3x2")
+    assert "HalfCheetah-3x2" in str(err.value) and "HalfCheetah-2x3" in str(err.value) and "Ant-2x4" in str(err.value)
+    registry.check(CHEETAH)
+
+
+@pytest.mark.parametrize("name", sorted(mamujoco.PARTITIONS))
+def test_homogeneous_flags_match_the_engines_spaces(name):
+    env = mamujoco.env_fn(name, 10)()
+    spaces = [(env.observation_space(a), env.action_space(a)) for a in env.possible_agents]
+    assert mamujoco.PARTITIONS[name] == all(s == spaces[0] for s in spaces)
+
+
+def test_actions_reach_the_engine_inside_the_box_even_from_extreme_policies():
+    vec = registry.make_vec(CHEETAH, n_envs=2, seed=0, max_steps=30)
+    space = vec.envs[0].action_space(vec.agents[0])
+    sent = []
+    for env in vec.envs:  # a spy at the env boundary: what every copy's step receives
+        def spy(actions, _step=env.step):
+            sent.append(np.stack([actions[a] for a in vec.agents]))
+            return _step(actions)
+        env.step = spy
+    gen = torch.Generator().manual_seed(0)
+    actors = Actors(2, vec.obs_dim, vec.n_actions, (8,), continuous=True, gen=gen)
+    with torch.no_grad():  # means of +-50 (far outside [-1, 1]) in alternating dimensions
+        for k in range(2):
+            actors.weights[k][-2].copy_(torch.tensor([50.0, -50.0, 50.0]))
+    batch, _ = collect(vec, vec.reset(), actors, [0, 1], 10, gen, {"env": 0.0, "policy": 0.0})
+    sent = np.stack(sent)
+    assert sent.shape == (20, 2, 3)
+    assert (batch.act.abs() > 10).all()  # the policy's own actions are far out of bounds
+    assert (sent >= space.low).all() and (sent <= space.high).all() and sent.dtype == space.dtype
+    np.testing.assert_array_equal(sent, np.broadcast_to([1.0, -1.0, 1.0], sent.shape))
+
+
+def test_get_state_set_state_continues_bit_exactly():
+    vec = registry.make_vec("mamujoco:Ant-2x4", n_envs=2, seed=3, max_steps=30)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (40, 2, 2, 4)).astype(np.float32)
+    vec.reset()
+    for a in actions[:25]:
+        vec.step(a)
+    saved = vec.get_state()
+    first = [vec.step(a) for a in actions[25:]]  # crosses the 30-step limit: reset and its randomness
+    vec.set_state(saved)
+    again = [vec.step(a) for a in actions[25:]]
+    assert any(s.truncated.any() for s in first)
+    for x, y in zip(first, again):
+        for field in ("obs", "state", "reward", "truncated", "final_obs"):
+            np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
+
+
+@pytest.mark.parametrize("algo", ["happo", "mappo", "oappo"])
+def test_a_few_iterations_end_to_end(tmp_path, algo):
+    rows = train(TrainConfig(algo=algo, steps=120, **TINY), tmp_path / algo, progress=False)
+    assert list(rows["step"]) == [0, 40, 80, 120]
+    assert np.isfinite(rows["eval_return"]).all() and rows["frac_opt"].isna().all()
+    assert (rows["env"] == CHEETAH).all()
+
+
+def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path):
+    cfg = TrainConfig(algo="oappo", steps=200, checkpoint_every=2, **TINY)
+    full = train(cfg, tmp_path / "full", progress=False)
+
+    def crash(metrics):
+        if metrics["iteration"] == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    assert load_checkpoint(tmp_path / "resumed")["iteration"] == 2
+    pd.testing.assert_frame_equal(full, train(cfg, tmp_path / "resumed", progress=False))
+
+
+def test_reuse_on_a_heterogeneous_partition_raises_clearly(tmp_path):
+    with pytest.raises(ValueError, match="needs equal spaces"):
+        train(TrainConfig(algo="oappo", steps=40, **{**TINY, "env": "mamujoco:Hopper-3x1"}), tmp_path, progress=False)
