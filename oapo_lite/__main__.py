@@ -1,6 +1,7 @@
 """Command line: ``python -m oapo_lite train ...`` (one run) or ``python -m oapo_lite reproduce ...``.
 
     python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --lam 0.7 --out runs/
+    python -m oapo_lite runs fig6b --budget cpu --workers 1
 
 Every ``TrainConfig`` field is a flag; the run goes to ``<out>/<algo>_<env>_s<seed>/``.
 """
@@ -63,7 +64,11 @@ def train_main(argv: list[str]) -> int:
         return 2
     run_dir = out / f"{cfg.algo}_{name.replace(':', '-')}_s{cfg.seed}"
     start = time.perf_counter()
-    rows = train(cfg, run_dir, resume=resume, progress=progress)
+    try:
+        rows = train(cfg, run_dir, resume=resume, progress=progress)
+    except ImportError as err:  # an engine that is not installed says how to install it
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     wall = time.perf_counter() - start
     last = rows.iloc[-1]
     hit = rows.loc[rows["frac_opt"] >= 0.95, "step"]
@@ -75,9 +80,33 @@ def train_main(argv: list[str]) -> int:
     return 0
 
 
+def runs_main(argv: list[str]) -> int:
+    """Train the missing runs of some figures at a budget (the run cache skips finished ones)."""
+    from oapo_lite import experiments
+
+    parser = argparse.ArgumentParser(prog="python -m oapo_lite runs", description=runs_main.__doc__)
+    parser.add_argument("figures", nargs="+", help="figure names, e.g. fig6b")
+    parser.add_argument("--budget", required=True)
+    parser.add_argument("--workers", type=int, default=1, help="runs trained at the same time")
+    args = parser.parse_args(argv)
+    try:
+        for fig in args.figures:
+            experiments.figure_runs(fig, args.budget)  # fail fast on a bad name
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    try:
+        count = experiments.run_all(args.budget, figures=args.figures, workers=args.workers)
+    except ImportError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"{count.done} runs trained, {count.cached} already on disk")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    commands = {"train": train_main}
+    commands = {"train": train_main, "runs": runs_main}
     if argv and argv[0] == "reproduce":
         from oapo_lite.reproduce import main as reproduce_main
 

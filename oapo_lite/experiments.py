@@ -43,14 +43,17 @@ def get_budget(name: str) -> Budget:
     return BUDGETS[name]
 
 
+COMMITTED = ("paper", "cpu")  # "cpu": the real engines' budget that fits this machine
+
+
 def figures_dir(budget: str) -> Path:
-    """The paper budget's figures are the committed ones; others go to a side folder.
+    """The paper (and cpu) budget's figures are the committed ones; others go to a side folder.
 
     ``OAPO_FIGURES`` moves the whole tree elsewhere (the timing benchmark uses it so as not
     to touch the committed results).
     """
     root = Path(os.environ.get("OAPO_FIGURES", ROOT / "figures"))
-    return root if budget == "paper" else root / budget
+    return root if budget in COMMITTED else root / budget
 
 
 def data_dir(budget: str) -> Path:
@@ -66,7 +69,50 @@ SCHEMES = ("NR", "UR", "RR", "AR")
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
 
 
+@dataclass(frozen=True)
+class EngineBudget:
+    """A real engine's budget: the usual Budget, the TrainConfig fields every run shares, and
+    per env its own fields. An env left out is not run at this budget."""
+
+    budget: Budget
+    train: dict
+    envs: dict  # env spec -> its own TrainConfig fields
+
+
+# Fig. 6b (GRF academy). The algorithms of the paper's table that the project has; SEAC and
+# SePS join by adding their names here.
+FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo")
+GRF = "grf:academy_"
+# HARL's tuned GRF settings (ANCHORS.md); the engine itself ends academy episodes (<= 400 steps)
+GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_steps=400)
+FIG6B = {
+    "smoke": EngineBudget(Budget((0,), 64, 1, 2), dict(n_envs=2, rollout_len=16, max_steps=32),
+                          {GRF + "3_vs_1_with_keeper": {}}),
+    # at most 2 hours on 2 cores (4 algorithms x 3 seeds x ~150 s); only the scenarios that learn
+    "cpu": EngineBudget(Budget((0, 1, 2), 96_000, 5, 16), dict(GRF_HARL, n_envs=8, rollout_len=200),
+                        {GRF + "3_vs_1_with_keeper": {}}),
+    "paper": EngineBudget(Budget((0, 1, 2, 3, 4), 25_000_000, 25, 32), dict(GRF_HARL, n_envs=50, rollout_len=200),
+                          {GRF + "pass_and_shoot_with_keeper": {}, GRF + "3_vs_1_with_keeper": {},
+                           GRF + "counterattack_easy": {},
+                           GRF + "counterattack_hard": dict(steps=50_000_000, rollout_len=1000)}),
+}
+ENGINE_FIGURES = {"fig6b": (FIG6B, FIG6B_ALGOS)}
+
+
+def engine_budget(figure: str, budget: str) -> EngineBudget:
+    budgets = ENGINE_FIGURES[figure][0]
+    if budget not in budgets:
+        raise ValueError(f"unknown budget {budget!r} for {figure}; choose from {sorted(budgets)}")
+    return budgets[budget]
+
+
 def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
+    if figure in ENGINE_FIGURES:
+        e, algos = engine_budget(figure, budget), ENGINE_FIGURES[figure][1]
+        b = e.budget
+        return [(algo, TrainConfig(**{"steps": b.steps, "eval_every": b.eval_every, "eval_episodes": b.eval_episodes,
+                                      **e.train, **own, "algo": algo, "env": env, "seed": s}))
+                for env, own in e.envs.items() for algo in algos for s in b.seeds]
     b = get_budget(budget)
 
     def cfg(**kw) -> TrainConfig:
@@ -83,7 +129,7 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
         "fig1": [("oappo", dict(algo="oappo", env="black_blue_red"))],
     }
     if figure not in grids:
-        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids)}")
+        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(grids) + sorted(ENGINE_FIGURES)}")
     seeds = b.seeds[:1] if figure == "fig1" else b.seeds
     return [(label, cfg(seed=s, **kw)) for label, kw in grids[figure] for s in seeds]
 
@@ -149,16 +195,27 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool = Tru
     return RunCount(done=len(missing), cached=len(todo) - len(missing))
 
 
+def figure_csv(figure: str, budget: str) -> Path:
+    """Where a figure's tidy rows go; the cpu budget shares the committed folder, so it is named."""
+    return data_dir(budget) / (f"{figure}_{budget}.csv" if budget == "cpu" else f"{figure}.csv")
+
+
+def missing_runs(figure: str, budget: str) -> list[TrainConfig]:
+    """The runs of a figure that are not on disk yet."""
+    return [cfg for _, cfg in figure_runs(figure, budget) if not run_path(cfg, budget).exists()]
+
+
 def load_figure(figure: str, budget: str, run_missing: bool = True) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked)."""
+    """The tidy rows of one figure: its missing runs are trained first if ``run_missing``,
+    otherwise left out (``missing_runs`` lists them)."""
     if run_missing:
         run_all(budget, figures=(figure,), progress=False)
-    frames = []
-    for label, cfg in figure_runs(figure, budget):
-        df = pd.read_csv(run_path(cfg, budget))
-        frames.append(df.assign(label=label, figure=figure))
+    frames = [pd.read_csv(run_path(cfg, budget)).assign(label=label, figure=figure)
+              for label, cfg in figure_runs(figure, budget) if run_path(cfg, budget).exists()]
+    if not frames:
+        return pd.DataFrame()
     df = pd.concat(frames, ignore_index=True)
-    write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    write_csv_atomic(df, figure_csv(figure, budget))
     revisions = sorted(df["git_rev"].astype(str).unique())
     if len(revisions) > 1:  # cached runs outlive code changes; say so rather than mix silently
         print(f"warning: {figure} mixes runs from git revisions {revisions}")

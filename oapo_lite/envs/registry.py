@@ -12,7 +12,9 @@ import importlib
 from .core import make_vec as make_maze_vec
 from .maps import load_maze
 
-ENGINES: dict[str, str] = {}  # prefix -> module path
+ENGINES: dict[str, str] = {  # prefix -> module path
+    "grf": "oapo_lite.envs.grf",
+}
 
 
 def split(spec: str) -> tuple[str | None, str]:
