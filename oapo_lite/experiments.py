@@ -112,7 +112,7 @@ def figure_runs(figure: str, budget: str) -> list[tuple[object, TrainConfig]]:
         b = e.budget
         return [(algo, TrainConfig(**{"steps": b.steps, "eval_every": b.eval_every, "eval_episodes": b.eval_episodes,
                                       **e.train, **own, "algo": algo, "env": env, "seed": s}))
-                for env, own in e.envs.items() for algo in algos for s in b.seeds]
+                for env, own in e.envs.items() for s in b.seeds for algo in algos]  # seed 0 of every cell first
     b = get_budget(budget)
 
     def cfg(**kw) -> TrainConfig:

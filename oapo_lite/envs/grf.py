@@ -13,7 +13,9 @@ reset from that seed and its episode count, so a copy's episodes are a fixed seq
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
+import io
 import multiprocessing as mp
 import os
 import weakref
@@ -30,6 +32,7 @@ SCENARIOS = {
     "academy_counterattack_hard": 4,
 }
 OBS_DIM = 115  # simple115v2
+GAME_DURATION = 400  # every scenario above sets the engine's game_duration to 400 steps
 N_ACTIONS = 19  # gfootball's default action set
 INSTALL_HINT = ("Google Research Football is not installed in this Python; install it with `make grf` "
                 "(system libraries, then gfootball==2.10.2 built from source, ~7 min; see requirements-grf.txt)")
@@ -56,7 +59,8 @@ def copy_seed(seed: int, k: int) -> int:
 
 
 def _make_engine(name: str, seed: int):
-    import gfootball.env as football_env
+    with contextlib.redirect_stderr(io.StringIO()):  # gym 0.25's import-time notice, not ours to fix
+        import gfootball.env as football_env
 
     return football_env.create_environment(
         env_name=name, representation="simple115v2", rewards="scoring,checkpoints", stacked=False,
@@ -93,7 +97,7 @@ class _Copies:
             self.scored[e] |= info["score_reward"] > 0
             # the engine ends an academy episode on a goal, a lost ball, the ball out of play
             # or its own time limit (game_duration); only the time limit is a truncation
-            terminated[e] = done and self.t[e] < env.unwrapped._config["game_duration"]
+            terminated[e] = done and self.t[e] < GAME_DURATION
             truncated[e] = not terminated[e] and (done or self.t[e] >= self.max_steps)
             final_obs[e] = o
             if terminated[e] or truncated[e]:
@@ -104,7 +108,7 @@ class _Copies:
         return obs, final_obs, reward, terminated, truncated, ep_return, ep_success
 
     def get_state(self) -> dict:
-        return {"engines": [env.get_state() for env in self.envs], "t": self.t.copy(),
+        return {"engines": [env.get_state({}) for env in self.envs], "t": self.t.copy(),
                 "returns": self.returns.copy(), "scored": self.scored.copy()}
 
     def set_state(self, d: dict) -> None:
@@ -178,7 +182,12 @@ class GRFVec:
         self._gather()  # every worker built its engines (or raised)
 
     def _gather(self) -> list:
-        answers = [conn.recv() for conn in self._conns]
+        try:
+            answers = [conn.recv() for conn in self._conns]
+        except EOFError:
+            self.close()
+            raise RuntimeError(f"a GRF worker process of {self.name!r} died (exit codes "
+                               f"{[p.exitcode for p in self._procs]})") from None
         errors = [msg for status, msg in answers if status == "error"]
         if errors:
             self.close()
