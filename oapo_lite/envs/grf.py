@@ -18,6 +18,7 @@ import importlib.util
 import io
 import multiprocessing as mp
 import os
+import warnings
 import weakref
 
 import numpy as np
@@ -59,13 +60,15 @@ def copy_seed(seed: int, k: int) -> int:
 
 
 def _make_engine(name: str, seed: int):
-    with contextlib.redirect_stderr(io.StringIO()):  # gym 0.25's import-time notice, not ours to fix
+    # gym 0.25's import-time notice and old-step-API warnings concern gfootball's wrappers, not us
+    with contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
         import gfootball.env as football_env
 
-    return football_env.create_environment(
-        env_name=name, representation="simple115v2", rewards="scoring,checkpoints", stacked=False,
-        number_of_left_players_agent_controls=SCENARIOS[name],
-        other_config_options={"game_engine_random_seed": seed})
+        return football_env.create_environment(
+            env_name=name, representation="simple115v2", rewards="scoring,checkpoints", stacked=False,
+            number_of_left_players_agent_controls=SCENARIOS[name],
+            other_config_options={"game_engine_random_seed": seed})
 
 
 class _Copies:
@@ -108,7 +111,7 @@ class _Copies:
         return obs, final_obs, reward, terminated, truncated, ep_return, ep_success
 
     def get_state(self) -> dict:
-        return {"engines": [env.get_state({}) for env in self.envs], "t": self.t.copy(),
+        return {"engines": [env.get_state() for env in self.envs], "t": self.t.copy(),
                 "returns": self.returns.copy(), "scored": self.scored.copy()}
 
     def set_state(self, d: dict) -> None:
