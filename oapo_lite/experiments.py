@@ -145,7 +145,8 @@ def run_id(cfg: TrainConfig) -> str:
     defaults = TrainConfig().flat()
     changed = {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
     blob = json.dumps(changed, sort_keys=True, default=str)
-    return f"{cfg.algo}-{cfg.env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
+    env = cfg.env.replace(":", "-")  # "grf:x" -> "grf-x": a colon is no file name on every system
+    return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
