@@ -88,7 +88,8 @@ GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_ste
 FIG6B = {
     "smoke": EngineBudget(Budget((0,), 64, 1, 2), dict(n_envs=2, rollout_len=16, max_steps=32),
                           {GRF + "3_vs_1_with_keeper": {}}),
-    # at most 2 hours on 2 cores (4 algorithms x 3 seeds x ~150 s); only the scenarios that learn
+    # at most 2 hours on 2 cores at the engine's ~300 steps/s per core (ANCHORS.md): 12 runs of
+    # 96k steps; 3_vs_1 only, the scenario HARL learns fastest (whether it learns here is open)
     "cpu": EngineBudget(Budget((0, 1, 2), 96_000, 5, 16), dict(GRF_HARL, n_envs=8, rollout_len=200),
                         {GRF + "3_vs_1_with_keeper": {}}),
     "paper": EngineBudget(Budget((0, 1, 2, 3, 4), 25_000_000, 25, 32), dict(GRF_HARL, n_envs=50, rollout_len=200),
