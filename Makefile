@@ -3,7 +3,7 @@
 PY := .venv/bin/python
 BUDGET ?= smoke
 
-.PHONY: reproduce test venv book book-deps browser clean
+.PHONY: reproduce test venv grf book book-deps browser clean
 
 venv: .venv/installed
 
@@ -36,11 +36,28 @@ browser:
 	  SUDO=$$( [ "$$(id -u)" -eq 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium chromium-driver; }
 
+# Google Research Football: system libraries, then psutil (gfootball's build imports it), then
+# its Python deps, then the engine itself (a ~7 min C++ compile; pip caches the built wheel).
+GRF_APT := cmake build-essential libgl1-mesa-dev libegl-dev libsdl2-dev libsdl2-image-dev \
+	libsdl2-ttf-dev libsdl2-gfx-dev libboost-python-dev libboost-thread-dev \
+	libboost-system-dev libboost-filesystem-dev python3-dev
+grf: .venv/grf-installed
+
+.venv/grf-installed: .venv/installed requirements-grf.txt
+	@SUDO=$$( [ "$$(id -u)" -eq 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $(GRF_APT) > /dev/null
+	.venv/bin/pip install --quiet psutil==7.2.2
+	.venv/bin/pip install --quiet -r requirements-grf.txt -c environment.txt
+	# its build script runs `python3 -c 'import psutil ...'` from PATH, so the venv goes first
+	PATH="$(CURDIR)/.venv/bin:$$PATH" .venv/bin/pip install --quiet --no-build-isolation gfootball==2.10.2 -c environment.txt
+	touch $@
+
 reproduce: venv
 	$(PY) -m oapo_lite reproduce --budget $(BUDGET)
 
-# tests/test_book.py builds the book and opens every page in headless Chromium.
-test: venv book-deps browser
+# tests/test_book.py builds the book and opens every page in headless Chromium; tests/test_grf.py
+# needs the real GRF engine.
+test: venv book-deps browser grf
 	$(PY) -m pytest -q tests
 	$(PY) -m oapo_lite reproduce --budget smoke --check
 	$(PY) -m pytest -q -p no:cacheprovider --nbval --nbval-current-env --nbval-sanitize-with notebooks/sanitize.cfg notebooks
