@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.experiments import get_budget
+from oapo_lite.experiments import get_figure
 from oapo_lite.train import TrainConfig, train
 
 
@@ -55,7 +55,7 @@ def vector(name: str, steps: int, n_envs: int) -> tuple[float, float]:
 def loop(name: str, steps: int) -> tuple[tuple[float, float], dict]:
     """The figure's cpu configuration, evaluated on one episode at the start and the end only
     (their time counts, their steps do not: a conservative rate)."""
-    b = get_budget("cpu", "figA_mamujoco")
+    b = get_figure("figA_mamujoco").budget("cpu")
     cfg = TrainConfig(algo="oappo", env=f"mamujoco:{name}", steps=steps, eval_every=10_000, eval_episodes=1,
                       **{**b.config, "checkpoint_every": 10_000})
     out = {}
@@ -69,7 +69,7 @@ def main() -> None:
     parser.add_argument("--envs", nargs="+", default=["HalfCheetah-2x3", "Ant-2x4"])
     parser.add_argument("--steps", type=int, default=20_000, help="env steps per measurement")
     args = parser.parse_args()
-    n_envs = get_budget("cpu", "figA_mamujoco").config["n_envs"]
+    n_envs = get_figure("figA_mamujoco").budget("cpu").config["n_envs"]
     for name in args.envs:
         print(f"{name}")
         print(f"  bare engine           {rate(args.steps, bare(name, args.steps))}")

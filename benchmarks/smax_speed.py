@@ -29,8 +29,10 @@ from oapo_lite.train import TrainConfig, train
 
 
 def config(map_name: str, algo: str, iterations: int) -> TrainConfig:
-    cfg = next(c for label, c in experiments.smax_runs("cpu") if c.env == f"smax:{map_name}" and label == algo)
-    return dataclasses.replace(cfg, steps=iterations * cfg.n_envs * cfg.rollout_len)
+    """The figure's settings for ``algo`` on ``map_name`` (every map has runs at ``paper``)."""
+    cfg = next(r.cfg for r in experiments.runs_of("fig4_smax", "paper")
+               if r.cfg.env == f"smax:{map_name}" and r.label == algo)
+    return dataclasses.replace(cfg, steps=iterations * cfg.n_envs * cfg.rollout_steps)
 
 
 def clocks() -> tuple[float, float]:
@@ -93,7 +95,10 @@ def grid(iterations: int) -> None:
     short run evaluates twice, more often than a full one: the projection errs high)."""
     total = 0.0
     print(f"{'map':<24} {'algo':<7} {'CPU s/1k':>9} {'runs':>5} {'steps':>9} {'CPU h':>6}")
-    for map_name, (seeds, steps, _) in experiments.SMAX_BUDGETS["cpu"].items():
+    fig = experiments.get_figure("fig4_smax")
+    for env in fig.envs("cpu"):
+        map_name, b = env.removeprefix("smax:"), fig.budget("cpu", env)
+        seeds, steps = len(b.seeds), b.steps
         base = config(map_name, "oappo", iterations)
         SmaxVec(map_name, base.n_envs, 0, base.max_steps)  # compile outside the measurement
         for algo in experiments.SMAX_ALGOS:

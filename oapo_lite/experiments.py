@@ -112,7 +112,7 @@ class Figure:
         """This figure's budget ``name`` (for the curves on ``env``, if it has its own)."""
         own = dict(self.budgets.get(name, {}))
         envs = own.pop("envs", {})
-        return replace(get_budget(name), **own, **envs.get(env, {}))
+        return replace(get_budget(name), **{**own, **envs.get(env, {})})
 
     def envs(self, name: str) -> tuple[str, ...] | None:
         """The envs this figure runs at budget ``name`` (None: every curve's)."""
@@ -201,6 +201,7 @@ GRID = (
            }),
 )
 FIGURES = tuple(f.id for f in GRID)
+MAZE_FIGURES = tuple(f.id for f in GRID if f.runs_at is None)  # Section 6.1; the others run real engines
 
 
 def get_figure(figure: "Figure | str") -> Figure:

@@ -36,7 +36,7 @@ def test_paper20_is_paper_with_twenty_seeds():
     assert paper20.seeds == tuple(range(20)) and paper20.seeds[:5] == paper.seeds
     assert (paper20.steps, paper20.eval_every, paper20.eval_episodes) == (paper.steps, paper.eval_every, paper.eval_episodes)
     # the first five seeds are the very runs of the paper budget (same ids)
-    for fig in experiments.FIGURES:
+    for fig in experiments.MAZE_FIGURES:
         ids = {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper20")}
         assert {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper")} <= ids
 

@@ -177,7 +177,7 @@ def test_claim_table_has_a_row_per_budget_and_claim():
     assert len(table) == 2 * len(v.CLAIMS["fig3b"])
     by = table.set_index("budget")
     assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
-    assert (by.loc["one", "verdict"] == v.DIRECTION).all()  # one seed never proves anything
+    assert (by.loc["one", "verdict"] == v.NOT_TESTABLE).all()  # one seed cannot decide anything
 
 
 def test_one_seed_is_never_more_than_direction():
