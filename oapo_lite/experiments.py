@@ -189,7 +189,7 @@ GRID = (
     # steps/s per core, 3_vs_1_with_keeper alone (the scenario HARL learns fastest) fits.
     Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
            runs_at=ENGINE_BUDGETS, budgets={
-               "smoke": dict(steps=64, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
+               "smoke": dict(steps=160, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
                              envs={"grf:academy_3_vs_1_with_keeper": {}}),
                "cpu": dict(seeds=(0, 1, 2), steps=96_000, eval_every=5, eval_episodes=16,
                            config=dict(GRF_HARL, n_envs=8, rollout_len=200),
@@ -252,7 +252,7 @@ def _config(b: Budget, **kw) -> TrainConfig:
     batch = kw.get("n_envs", TrainConfig.n_envs) * kw.get("rollout_len", TrainConfig.rollout_len)
     ratio = max(1, batch // (A2C_ENVS * TrainConfig.n_step))
     if kw["algo"] == "seps":
-        kw["seps_pretrain_steps"] = b.steps // 10
+        kw["seps_pretrain_steps"] = max(b.steps // 10, A2C_ENVS * TrainConfig.n_step)  # >= one update
     kw |= dict(n_envs=A2C_ENVS, checkpoint_every=kw.get("checkpoint_every", TrainConfig.checkpoint_every) * ratio)
     return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes, **kw)
 

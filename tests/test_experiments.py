@@ -97,6 +97,9 @@ def test_bad_executor_options_name_what_is_allowed(capsys):
 
 
 def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_names():
+    for fig in experiments.FIGURES:  # every run of every figure is a valid config at every budget
+        for budget in experiments.BUDGETS:
+            experiments.runs_of(fig, budget)
     cpu = {f: experiments.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
     for fig, runs in cpu.items():
         labels = {r.label for r in runs}
