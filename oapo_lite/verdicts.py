@@ -69,7 +69,9 @@ class Metric:
 FRAC_OPT = Metric("frac_opt", THRESHOLD, -np.inf, "{:.0%} of the optimum", "final fraction of the optimum")
 WIN_RATE = Metric("eval_success", 0.5, 0.05, "a {:.0%} win rate", "final win rate")
 RETURN = Metric("eval_return", np.inf, -np.inf, "return {:g}", "final evaluation return")
-FIGURE_METRICS = {"fig4_smax": WIN_RATE, "figA_mamujoco": RETURN}  # the others: FRAC_OPT
+# GRF's score: the share of evaluation episodes with a goal; "nearly perfect" is 90%
+SCORE = Metric("eval_success", 0.9, 0.05, "a {:.0%} score", "final score (share of episodes with a goal)")
+FIGURE_METRICS = {"fig4_smax": WIN_RATE, "figA_mamujoco": RETURN, "fig6b": SCORE}  # the others: FRAC_OPT
 
 
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
@@ -217,6 +219,8 @@ class Verdict:
         return self.status == REPRODUCED
 
     def sentence(self) -> str:
+        if self.status == NOT_TESTABLE:
+            return f"{self.claim}: {self.status}: {self.evidence}"
         return f"{self.claim}: {self.status} (two-standard-error rule: {self.se_status}). {self.evidence}"
 
 
@@ -302,7 +306,7 @@ def _single(ev: Evidence, a, claim: str, below: bool) -> Verdict:
         status = REPRODUCED if est.low >= thr else DIRECTION if est.point >= thr else NOT
         se = _se_status(s.loc[a, "final_mean"] - thr + 1e-12, _stderr(s, a, "final"))
     return Verdict(claim, status, se,
-                   f"final fraction, IQM [95% CI]: {_fmt_final(ev, a)}; {s.loc[a, 'reached']} of "
+                   f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)}; {s.loc[a, 'reached']} of "
                    f"{s.loc[a, 'seeds']} seeds ever reached {thr:.0%}.", f"IQM final {est.fmt()}")
 
 
@@ -368,6 +372,19 @@ SMAX_CLAIMS = sorted([
     *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
 ], key=lambda c: SMAX_MAPS.index(c[0]))  # map by map (a stable sort keeps each map's order)
 
+# Section 6.3 (Fig. 6b) on GRF, per scenario: individual experience suffices on the two simple
+# tasks (HAPPO, own experience only, nearly perfect); OAPPO and OATRPO are best on the
+# counterattacks (each ends above every other algorithm of the table).
+GRF_CLAIMS = [
+    *((s, optimal, ("happo",), f"{s}: own experience alone (HAPPO) scores nearly perfectly")
+      for s in ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper")),
+    *((s, higher, (ours, other), f"{s}: {ours.upper()} ends above {other.upper()}")
+      for s in ("counterattack_easy", "counterattack_hard") for ours in ("oappo", "oatrpo")
+      for other in ("mappo", "happo", "seac", "seps")),
+]
+# figure -> (the env prefix its ``env`` column carries, its per-env claims)
+ENV_CLAIMS = {"fig4_smax": ("smax:", SMAX_CLAIMS), "fig6b": ("grf:academy_", GRF_CLAIMS)}
+
 # App. A (see ASSUMPTIONS.md): on homogeneous agents, reusing others' experience as it is (SEAC's
 # importance-weighted reuse; MAPPO's one network on everyone's data) ends lower than using one's
 # own (HAPPO), while OAPPO's gated reuse does not.
@@ -381,7 +398,9 @@ CLAIMS["figA_mamujoco"] = [
 
 def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     """Why the data cannot decide a claim about ``labels``, or None if it can."""
-    s = ev.summary if ev is not None else pd.DataFrame(columns=["seeds"])
+    if ev is None:
+        return "no run of this env on disk at this budget."
+    s = ev.summary
     few = [f"{x} ({int(s.loc[x, 'seeds']) if x in s.index else 0})" for x in labels
            if x not in s.index or s.loc[x, "seeds"] < 2]
     if few:
@@ -403,12 +422,13 @@ def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
     """Check every claim the paper makes about ``figure`` against that figure's data (a claim
     the data cannot decide is ``NOT_TESTABLE``, saying why)."""
     metric = FIGURE_METRICS.get(figure, FRAC_OPT)
-    if figure == "fig4_smax":
-        maps = df["env"].str.removeprefix("smax:") if len(df) else pd.Series(dtype=str)
-        evidence = {m: Evidence(df[maps == m], metric=metric) for m in SMAX_MAPS if (maps == m).any()}
-        return [_check(evidence.get(m), test, labels, claim) for m, test, labels, claim in SMAX_CLAIMS]
+    if figure in ENV_CLAIMS:  # claims per map or scenario, each judged on that env's runs
+        prefix, env_claims = ENV_CLAIMS[figure]
+        envs = df["env"].str.removeprefix(prefix) if len(df) else pd.Series(dtype=str)
+        evidence = {e: Evidence(df[envs == e], metric=metric) for e in set(envs)}
+        return [_check(evidence.get(e), test, labels, claim) for e, test, labels, claim in env_claims]
     if figure not in CLAIMS:
-        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted([*CLAIMS, 'fig4_smax'])}")
+        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted([*CLAIMS, *ENV_CLAIMS])}")
     ev = Evidence(df, metric=metric) if len(df) else None
     return [_check(ev, test, labels, claim) for test, labels, claim in CLAIMS[figure]]
 

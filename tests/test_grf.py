@@ -100,11 +100,12 @@ def test_a_grf_run_trains_end_to_end(tmp_path):
 
 
 def test_fig6b_budgets_are_data_and_every_run_has_its_own_id():
-    for budget in experiments.FIG6B:
+    for budget in experiments.ENGINE_BUDGETS:
         runs = experiments.figure_runs("fig6b", budget)
         assert {label for label, _ in runs} == set(experiments.FIG6B_ALGOS)
         assert len({experiments.run_id(cfg) for _, cfg in runs}) == len(runs)
     paper = experiments.figure_runs("fig6b", "paper")
     assert {cfg.env for _, cfg in paper} == {f"grf:{s}" for s in grf.SCENARIOS}
-    with pytest.raises(ValueError, match="unknown budget 'huge' for fig6b"):
+    assert {cfg.steps for _, cfg in paper if cfg.env == "grf:academy_counterattack_hard"} == {50_000_000}
+    with pytest.raises(ValueError, match="unknown budget 'huge'"):
         experiments.figure_runs("fig6b", "huge")

@@ -250,3 +250,18 @@ def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data
     assert not {x.claim: x for x in v.claims("figA_mamujoco", swapped)}[
         "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
     assert all(x.status == v.NOT_TESTABLE for x in v.claims("figA_mamujoco", pd.DataFrame()))
+
+
+def test_grf_claims_are_judged_per_scenario_on_the_score():
+    rows = [dict(label=label, seed=seed, env=f"grf:academy_{scenario}", step=10_000 * k, eval_success=w)
+            for scenario, spec in {"3_vs_1_with_keeper": {"happo": [0, 0.5, 0.95, 0.97]},
+                                   "counterattack_easy": {"oappo": [0, 0.4, 0.8, 0.8], "mappo": [0, 0.1, 0.2, 0.2]}}.items()
+            for label, wins in spec.items() for seed in range(5) for k, w in enumerate(wins)]
+    out = {x.claim: x for x in v.claims("fig6b", pd.DataFrame(rows))}
+    assert out["3_vs_1_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].held
+    assert out["counterattack_easy: OAPPO ends above MAPPO"].held
+    assert "final score" in out["counterattack_easy: OAPPO ends above MAPPO"].evidence
+    # scenarios or algorithms without runs cannot be judged
+    assert out["counterattack_easy: OAPPO ends above SEAC"].status == v.NOT_TESTABLE
+    assert out["counterattack_hard: OATRPO ends above HAPPO"].status == v.NOT_TESTABLE
+    assert out["pass_and_shoot_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].status == v.NOT_TESTABLE
