@@ -25,7 +25,7 @@ import torch
 from torch import nn
 
 from oapo_lite import seps
-from oapo_lite.losses import source_mean
+from oapo_lite.losses import check_finite, source_mean
 from oapo_lite.nets import Actors, Critic
 
 log = logging.getLogger(__name__)
@@ -106,6 +106,7 @@ class A2C:
         """One A2C step of every network that controls a seat, on ``batch`` (a ``train.Rollout``)."""
         inputs, head = batch.inputs, self.actors.head
         returns = self.returns(batch, next_obs, owner)
+        check_finite(returns, "the n-step returns", "all: they share the team reward")
         nets = sorted(set(owner))
         # every used net on every distinct input in one batched forward, gathered per seat
         k, U = len(nets), inputs.obs.shape[0]
@@ -116,6 +117,7 @@ class A2C:
             own = torch.tensor([c == net for c in owner])
             loss, p = seac_loss(head.log_prob(d[row], batch.act), batch.logp, v[row], returns,
                                 head.entropy(d[row]), own, self.lam, self.entropy_coef, batch.active)
+            check_finite(loss, "the SEAC / A2C loss", net)
             total, parts = total + loss, parts + [p]
         for opt in self.opts:
             opt.zero_grad()

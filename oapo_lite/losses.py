@@ -1,5 +1,6 @@
 """Objectives of the neural track: GAE, the off-agent surrogates (Eq. 7, Eq. 8), the
-sequential factor (rho in Eq. 6-8), the trust-region KL, and the critic's loss.
+sequential factor (rho in Eq. 6-8), the trust-region KL, the critic's loss, and the check
+that stops a run whose numbers stop being finite (``Diverged``).
 
 Shapes: a learner sees S sources (agents), each with the same B joint samples (time x env),
 so per-source tensors are (S, B) and joint tensors (advantage, factor) are (B,). ``active``
@@ -8,6 +9,7 @@ agent that left a PettingZoo episode early) contribute nothing.
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 
@@ -82,3 +84,18 @@ def value_loss(value: torch.Tensor, value_old: torch.Tensor, target: torch.Tenso
     raw_loss = torch.nn.functional.huber_loss(value, target, reduction="none", delta=delta)
     clip_loss = torch.nn.functional.huber_loss(clipped, target, reduction="none", delta=delta)
     return torch.max(raw_loss, clip_loss).mean()
+
+
+class Diverged(FloatingPointError):
+    """A loss, advantage, factor or KL that is NaN or infinite: the run stops (the last
+    checkpoint is written only after a whole finite iteration, so it stays the last good one)."""
+
+    def __init__(self, quantity: str, learner: int | str, where: str = "", then: str = ""):
+        super().__init__(f"{where}{quantity} is not finite (learner {learner}){then}")
+        self.quantity, self.learner = quantity, learner
+
+
+def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, learner: int | str) -> None:
+    """Raise ``Diverged`` naming the quantity and the learner if ``x`` holds a NaN or an inf."""
+    if not torch.isfinite(torch.as_tensor(x)).all():
+        raise Diverged(quantity, learner)

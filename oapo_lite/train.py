@@ -30,8 +30,8 @@ from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.core import VecMaze
 from oapo_lite.envs.oracle import optimal_return
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.losses import (gae, normalise, off_agent_objective, source_mean, update_factor, value_loss,
-                              weighted_kl)
+from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
+                              update_factor, value_loss, weighted_kl)
 from oapo_lite.nets import Actors, Critic, ValueNorm
 from oapo_lite.trpo import trpo_step
 
@@ -198,21 +198,6 @@ def check_reuse_spaces(env, pairs: np.ndarray) -> None:
             raise ValueError(
                 f"reuse between agents {env.agents[i]!r} and {env.agents[j]!r} needs equal spaces, got "
                 f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")
-
-
-class Diverged(FloatingPointError):
-    """A loss, advantage, factor or KL that is NaN or infinite: the run stops (the last
-    checkpoint is written only after a whole finite iteration, so it stays the last good one)."""
-
-    def __init__(self, quantity: str, learner: int | str, where: str = "", then: str = ""):
-        super().__init__(f"{where}{quantity} is not finite (learner {learner}){then}")
-        self.quantity, self.learner = quantity, learner
-
-
-def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, learner: int | str) -> None:
-    """Raise ``Diverged`` naming the quantity and the learner if ``x`` holds a NaN or an inf."""
-    if not torch.isfinite(torch.as_tensor(x)).all():
-        raise Diverged(quantity, learner)
 
 
 def _seed(*keys: int) -> int:
@@ -655,7 +640,10 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
         batch, step = collect(env, step, actors, owner, cfg.rollout_steps, act_gen, clock)
         tic = time.perf_counter()
         if learner is not None:
-            metrics, trpo_kls = learner.learn(batch, step, it), []
+            try:
+                metrics, trpo_kls = learner.learn(batch, step, it), []
+            except Diverged as err:
+                raise _diverged_at(err, it + 1, cfg, out, owner, env.agents) from None
             owner = learner.owner  # SePS regroups once its pre-training ends
             clock["learn"] += time.perf_counter() - tic
         else:

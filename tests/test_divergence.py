@@ -44,23 +44,29 @@ class NanAfter(ParallelEnv):
         return obs, {k: r for k in agents}, {k: done for k in agents}, {k: False for k in agents}, {k: {} for k in agents}
 
 
-@pytest.mark.parametrize("algo", ["oappo", "oatrpo"])
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo", "seac"])
 def test_a_nan_reward_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, algo):
-    # 2 copies x 10 steps per iteration: each copy's 41st step is in iteration 5
+    # 2 copies x 10 steps per iteration (SEAC: x its 5-step rollouts, twice as many iterations):
+    # each copy's 41st step is in iteration 5 (SEAC: 9)
+    a2c = algo == "seac"
     kw = dict(algo=algo, env_fn=lambda: NanAfter(bad_step=41), n_envs=2, rollout_len=10, eval_episodes=2,
-              eval_every=1, checkpoint_every=2)
+              eval_every=1, checkpoint_every=4 if a2c else 2)
     with pytest.raises(Diverged) as err:
         train(TrainConfig(steps=20 * 8, **kw), tmp_path / "broken", progress=False)
     message = str(err.value)
-    for words in ("joint advantage", "iteration 5 of", "(learner all: it is joint)", "(iteration 4) is left as it was"):
-        assert words in message
+    words = (("n-step returns", "iteration 9 of", "(learner all: they share the team reward)",
+              "(iteration 8) is left as it was") if a2c else
+             ("joint advantage", "iteration 5 of", "(learner all: it is joint)", "(iteration 4) is left as it was"))
+    for w in words:
+        assert w in message
     # the checkpoint is the one an uninterrupted 4-iteration run writes, bit for bit
     broken = load_checkpoint(tmp_path / "broken")
     train(TrainConfig(steps=20 * 4, **kw), tmp_path / "clean", progress=False)
     clean = load_checkpoint(tmp_path / "clean")
-    assert broken["iteration"] == clean["iteration"] == 4
+    good = 8 if a2c else 4
+    assert broken["iteration"] == clean["iteration"] == good
     assert all(torch.equal(broken["actors"][k], clean["actors"][k]) for k in clean["actors"])
-    assert [r["iteration"] for r in broken["rows"]] == [0, 1, 2, 3, 4]
+    assert [r["iteration"] for r in broken["rows"]] == list(range(good + 1))
 
 
 def _batch(actors: Actors, B: int = 32, seed: int = 1) -> Rollout:
