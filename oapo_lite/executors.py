@@ -7,6 +7,7 @@ so an executor never touches the run cache.
 """
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import re
 import sys
@@ -39,7 +40,9 @@ def local(jobs, workers: int = 2, address: str | None = None):
         for run, checkpoints in jobs:
             yield (run, *train_job(run.cfg, checkpoints))
         return
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+    # spawned, not forked: a parent that has imported JAX (SMAX) or started torch's threads
+    # cannot fork safely (JAX warns of deadlocks; a forked pool hung the test suite)
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn")) as pool:
         futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
         for future in as_completed(futures):
             try:

@@ -80,21 +80,25 @@ def run_files(runs: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(runs.glob("*.csv"))}
 
 
+# the maze figures: the engines' smoke runs are exercised by reproduce in CI and by their own tests
+MAZES = experiments.MAZE_FIGURES
+
+
 @pytest.fixture(scope="module")
 def local_smoke(tmp_path_factory):
     """The smoke grid trained by the local executor: the reference."""
     with figures_at(tmp_path_factory.mktemp("local")) as runs:
-        count = experiments.run_all("smoke", executor="local", workers=2, progress=False)
-    assert not count.failed and count.done == len(experiments.grid_runs("smoke"))
+        count = experiments.run_all("smoke", MAZES, executor="local", workers=2, progress=False)
+    assert not count.failed and count.done == len(experiments.grid_runs("smoke", MAZES))
     return run_files(runs)
 
 
 def test_the_smoke_grid_through_ray_equals_the_local_executor(cluster, local_smoke, tmp_path):
     with figures_at(tmp_path) as runs:
-        count = experiments.run_all("smoke", executor="ray", address=cluster, progress=False)
+        count = experiments.run_all("smoke", MAZES, executor="ray", address=cluster, progress=False)
         assert (count.done, count.cached, count.failed) == (len(local_smoke), 0, [])
         assert run_files(runs) == local_smoke  # same seeds: the same numbers, config and revision
-        again = experiments.run_all("smoke", executor="ray", address=cluster, progress=False)
+        again = experiments.run_all("smoke", MAZES, executor="ray", address=cluster, progress=False)
     assert (again.done, again.cached) == (0, len(local_smoke))  # what is on disk is never redone
 
 
