@@ -185,13 +185,14 @@ GRID = (
                "paper": dict(steps=10_000_000, eval_every=25, eval_episodes=10,
                              config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
            }),
-    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: at the engine's ~300
-    # steps/s per core, 3_vs_1_with_keeper alone (the scenario HARL learns fastest) fits.
+    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
+    # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run), so 18
+    # runs of 32k steps on 3_vs_1_with_keeper (the scenario HARL learns fastest) fit 2 hours.
     Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
            runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(steps=160, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
                              envs={"grf:academy_3_vs_1_with_keeper": {}}),
-               "cpu": dict(seeds=(0, 1, 2), steps=96_000, eval_every=5, eval_episodes=16,
+               "cpu": dict(seeds=(0, 1, 2), steps=32_000, eval_every=4, eval_episodes=16,
                            config=dict(GRF_HARL, n_envs=8, rollout_len=200),
                            envs={"grf:academy_3_vs_1_with_keeper": {}}),
                "paper": dict(steps=25_000_000, eval_every=25, config=dict(GRF_HARL, n_envs=50, rollout_len=200),
