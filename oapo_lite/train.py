@@ -90,8 +90,8 @@ class TrainConfig:
     reuse_mode: str = "weights"
     allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
     shared: bool | None = None  # one network for all seats; None: the algorithm's own choice
-    # None: Eq. 9 as written; "gradient" / "gradient_sign": Eq. 9's weights scaled online by the
-    # agreement of each source's surrogate gradient with the learner's own (oapo_lite/adaptive.py)
+    # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
+    # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
     reuse_adapt: str | None = None
     kl_threshold: float = 0.01  # TRPO delta
     cg_iters: int = 10
@@ -149,6 +149,8 @@ class TrainConfig:
             need(ALGOS[self.algo].reuse == "oapo", "reuse_adapt",
                  f"None with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
             need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
+            need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
+                 f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
         if isinstance(self.allowed, str):
             need(self.allowed in SCHEMES, "allowed", f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
         elif self.allowed is not None:
@@ -458,25 +460,35 @@ def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: s
 
 
 def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarray, adv: torch.Tensor,
-                     clip: float | None) -> np.ndarray:
-    """(n, n, P): row i, column j is the gradient, in learner i's parameters as they are now, of
-    its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on source
-    j's samples alone, with the factor rho = 1 (nobody has moved yet). Sources that M[i] gives
-    no weight get zeros (the adaptive rule only rescales what Eq. 9 allows). Separate nets only."""
-    n = M.shape[0]
+                     clip: float | None, folds: int = 1) -> np.ndarray:
+    """(n, n, folds, P): row i, column j is the gradient, in learner i's parameters as they are
+    now, of its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on
+    source j's samples alone, with the factor rho = 1 (nobody has moved yet); with ``folds`` > 1,
+    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. Sources
+    that M[i] gives no weight get zeros (the adaptive rule only rescales what Eq. 9 allows).
+    Separate nets only."""
+    n, n_envs = M.shape[0], batch.reward.shape[1]
+    if not 1 <= folds <= n_envs:
+        raise ValueError(f"folds = {folds!r} must lie in [1, n_envs = {n_envs}]")
     size = sum(p.numel() for p in actors.net_params(0))
-    grads = np.zeros((n, n, size))
+    grads = np.zeros((n, n, folds, size))
     ones = torch.ones(1)
+    # sample b is step b // n_envs of env copy b % n_envs (``_per_agent``)
+    fold_of = torch.arange(adv.shape[0]) % n_envs % folds
     for i in range(n):
         src = Sources.of(i, M, list(range(n)), batch)
         params = actors.net_params(i)
         logp = actors.head.log_prob(learner_dists(actors, inputs, src), src.act)
         for r, j in enumerate(src.rows):
-            active = None if src.active is None else src.active[r:r + 1]
-            obj = off_agent_objective(logp[r:r + 1], src.logp_old[r:r + 1], ones, torch.ones_like(adv), adv, clip,
-                                      active)
-            g = torch.autograd.grad(obj, params, retain_graph=r + 1 < len(src.rows))
-            grads[i, j] = torch.cat([x.reshape(-1) for x in g]).double().numpy()
+            for f in range(folds):
+                active = None if src.active is None else src.active[r:r + 1]
+                if folds > 1:  # one fold alone; with one fold the plain mean, bit for bit
+                    active = (fold_of == f)[None] if active is None else active & (fold_of == f)[None]
+                obj = off_agent_objective(logp[r:r + 1], src.logp_old[r:r + 1], ones, torch.ones_like(adv), adv,
+                                          clip, active)
+                last = r + 1 == len(src.rows) and f + 1 == folds
+                g = torch.autograd.grad(obj, params, retain_graph=not last)
+                grads[i, j, f] = torch.cat([x.reshape(-1) for x in g]).double().numpy()
     check_finite(grads, "a source gradient of the adaptive reuse rule", "all")
     return grads
 
@@ -699,8 +711,9 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                 K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
                 M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
                 if cfg.reuse_adapt is not None:
-                    C = adaptive.cosine_agreement(source_gradients(
-                        actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip))
+                    G = source_gradients(actors, batch.inputs, batch, M, adv,
+                                         None if spec.trust_region else cfg.clip, adaptive.folds(cfg.reuse_adapt))
+                    C = adaptive.agreement(G, cfg.reuse_adapt)
                     M = adaptive.agreement_matrix(M, C, cfg.reuse_adapt)
                 W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
                 W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat

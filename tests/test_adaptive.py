@@ -39,6 +39,42 @@ def test_three_agents_by_hand():
     assert np.allclose(adaptive.agreement_matrix(m, c, "gradient_sign"), sign)
 
 
+def test_the_test_rule_by_hand():
+    """Two learners, two folds, one parameter. D_f = g_ii^(f) * g_ij^(other fold)."""
+    g = np.zeros((2, 2, 2, 1))
+    g[0, 0, :, 0] = [1.0, 3.0]  # learner 0, own, folds 0 and 1
+    g[0, 1, :, 0] = [-2.0, -1.0]  # D = (1 * -1, 3 * -2) = (-1, -6): mean -3.5, sd 3.5355, se 2.5
+    g[1, 1, :, 0] = [2.0, -2.0]
+    g[1, 0, :, 0] = [1.0, 1.0]  # D = (2 * 1, -2 * 1) = (2, -2): mean 0, se 2
+    t = adaptive.disagreement_t(g)
+    assert np.isclose(t[0, 1], -3.5 / 2.5) and t[1, 0] == 0.0 and np.isinf(t[0, 0]) and t[0, 0] > 0
+    m = np.array([[0.7, 0.3], [0.3, 0.7]])
+    # -1.4 < -1: learner 0 strikes source 1; learner 1 has no evidence either way and keeps 0
+    assert np.allclose(adaptive.agreement_matrix(m, t, "gradient_test"), [[1.0, 0.0], [0.3, 0.7]])
+    g[0, 1, :, 0] = [-0.1, -0.1]  # D = (-0.1, -0.3): mean -0.2, se 0.1 -> t = -2
+    assert np.isclose(adaptive.disagreement_t(g)[0, 1], -2.0)
+    g[0, 1, :, 0] = [0.5, -0.5]  # D = (-0.5, 1.5): mean 0.5 -> kept
+    assert adaptive.disagreement_t(g)[0, 1] > 0
+
+
+def test_the_test_rule_strikes_only_shared_systematic_disagreement():
+    """Noise around a zero mean is kept most of the time (a t with 3 degrees of freedom is below
+    -1 about 20% of the time; the folds' products share folds, so a little more); a systematic
+    disagreement is struck almost always."""
+    rng = np.random.default_rng(0)
+    m = np.array([[0.7, 0.3], [0.3, 0.7]])
+    kept = {}
+    for name, mean in (("noise", 0.0), ("against", -1.0)):
+        count = 0
+        for _ in range(400):
+            g = rng.normal(size=(2, 2, 4, 50))
+            g[0, 0] += 1.0  # learner 0's own expected gradient: (1, ..., 1)
+            g[0, 1] += mean  # the source's: 0 (unrelated) or (-1, ..., -1) (against)
+            count += adaptive.agreement_matrix(m, adaptive.disagreement_t(g), "gradient_test")[0, 1] > 0
+        kept[name] = count / 400
+    assert 0.65 < kept["noise"] < 0.9 and kept["against"] < 0.05
+
+
 def _random(n, seed):
     rng = np.random.default_rng(seed)
     kl = rng.exponential(0.2, size=(n, n))
@@ -47,6 +83,13 @@ def _random(n, seed):
 
 
 RULES = adaptive.ADAPT_RULES
+COSINE_RULES = adaptive.COSINE_RULES
+
+
+def _statistic(g, rule):
+    """The statistic ``rule`` reads, from per-source gradients (n, n, P) split into 4 noisy folds."""
+    folds = g[:, :, None] + np.random.default_rng(1).normal(size=(*g.shape[:2], 4, g.shape[2]))
+    return adaptive.agreement(folds if rule == "gradient_test" else g[:, :, None], rule)
 
 
 @pytest.mark.parametrize("rule", RULES)
@@ -54,14 +97,14 @@ RULES = adaptive.ADAPT_RULES
 @pytest.mark.parametrize("n", [1, 2, 3, 5])
 def test_rows_are_distributions_that_never_reuse_more_than_eq9(n, seed, rule):
     m, g = _random(n, seed)
-    out = adaptive.agreement_matrix(m, adaptive.cosine_agreement(g), rule)
+    out = adaptive.agreement_matrix(m, _statistic(g, rule), rule)
     assert np.allclose(out.sum(1), 1.0) and (out >= 0).all()
     off = ~np.eye(n, dtype=bool)
     assert (out[off] <= m[off] + 1e-12).all()
     assert (np.diag(out) >= np.diag(m) - 1e-12).all()
 
 
-@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("rule", COSINE_RULES)
 def test_full_agreement_is_eq9_and_full_disagreement_is_happo(rule):
     kl = np.array([[0.0, 0.05, 0.5], [0.05, 0.0, 0.02], [0.3, 0.02, 0.0]])
     m = reuse.oapo_matrix(kl, sigma=0.1, lam=0.6)
@@ -72,7 +115,7 @@ def test_full_agreement_is_eq9_and_full_disagreement_is_happo(rule):
     assert np.array_equal(adaptive.agreement_matrix(m, np.zeros((3, 3)), rule), np.eye(3))
 
 
-@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("rule", COSINE_RULES)
 @pytest.mark.parametrize("seed", range(20))
 def test_the_mixed_direction_always_climbs_the_learners_own_objective(seed, rule):
     """The module's argument: G_i . g_ii >= M'[i, i] |g_ii|^2, so G_i = 0 forces g_ii = 0."""
@@ -96,7 +139,10 @@ def test_the_mixed_direction_always_climbs_the_learners_own_objective(seed, rule
     (lambda: adaptive.agreement_matrix(np.eye(2), np.full((2, 2), 1.5)), ["[-1, 1]"]),
     (lambda: adaptive.agreement_matrix(np.full((2, 2), 0.7), np.ones((2, 2))), ["sum to 1"]),
     (lambda: adaptive.agreement_matrix(np.ones(3), np.ones(3)), ["square"]),
-    (lambda: adaptive.agreement_matrix(np.eye(2), np.ones((2, 2)), "kl"), ["'kl'", "gradient", "gradient_sign"]),
+    (lambda: adaptive.agreement_matrix(np.eye(2), np.ones((2, 2)), "kl"), ["'kl'", "gradient", "gradient_test"]),
+    (lambda: adaptive.disagreement_t(np.zeros((2, 2, 1, 3))), ["folds >= 2", "(2, 2, 1, 3)"]),
+    (lambda: adaptive.agreement(np.zeros((2, 2, 1, 3)), "gradient_test"), ["(n, n, 4, parameters)", "gradient_test"]),
+    (lambda: adaptive.agreement_matrix(np.eye(2), np.full((2, 2), np.nan), "gradient_test"), ["NaN"]),
 ])
 def test_bad_inputs_raise_naming_what_is_wrong(call, words):
     with pytest.raises(ValueError) as err:
@@ -108,6 +154,7 @@ def test_bad_inputs_raise_naming_what_is_wrong(call, words):
     (dict(reuse_adapt="variance"), ["reuse_adapt", "variance", "gradient"]),
     (dict(reuse_adapt="gradient", algo="happo"), ["reuse_adapt", "happo", "oappo", "oatrpo"]),
     (dict(reuse_adapt="gradient", shared=True), ["reuse_adapt", "shared=True"]),
+    (dict(reuse_adapt="gradient_test", n_envs=2, steps=100), ["n_envs", ">= 4", "gradient_test"]),
 ])
 def test_bad_config_raises_naming_the_value_and_the_allowed(bad, words):
     with pytest.raises(ValueError) as err:
@@ -137,8 +184,11 @@ def test_source_gradients_add_up_to_the_gradient_of_the_weighted_objective(clip)
     batch, _ = collect(env, env.reset(), actors, [0, 1], cfg.rollout_len, gen, {"env": 0.0, "policy": 0.0})
     adv = torch.randn(batch.act.shape[1], generator=gen)
     m = np.array([[0.7, 0.3], [0.0, 1.0]])
-    g = source_gradients(actors, batch.inputs, batch, m, adv, clip)
+    g = source_gradients(actors, batch.inputs, batch, m, adv, clip)[:, :, 0]
     assert np.all(g[1, 0] == 0.0)
+    # per fold of env copies (8 copies, 4 folds of 2): the whole batch's gradient is their mean
+    folds = source_gradients(actors, batch.inputs, batch, m, adv, clip, folds=4)
+    assert np.allclose(folds.mean(2), g, atol=1e-6) and not np.allclose(folds[:, :, 0], g)
     src = Sources.of(0, m, [0, 1], batch)
     params = actors.net_params(0)
     d = learner_dists(actors, batch.inputs, src)
@@ -157,6 +207,7 @@ def test_adaptive_runs_log_eq9_times_agreement_and_default_runs_are_untouched(tm
         for _, r in rows.iloc[1:].iterrows():
             k, c, m = (np.array(json.loads(r[col])) for col in ("kl_matrix", "agreement", "reuse_matrix"))
             assert np.allclose(m, adaptive.agreement_matrix(reuse.oapo_matrix(k, 0.1, 0.7), c, rule), atol=1e-5)
+            assert (np.diag(m) >= 0.7 - 1e-9).all()
     again = train(TrainConfig(algo="oappo", reuse_adapt=rule, **SMALL_BR), tmp_path / "again",
                   resume=False, progress=False)
     assert rows.equals(again)
