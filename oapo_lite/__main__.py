@@ -36,6 +36,8 @@ def train_parser() -> argparse.ArgumentParser:
         "allowed": dict(type=_none_or(str), help="none or a scheme: NR, UR, RR, AR"),
         "shared": dict(type=_none_or(_bool), help="none (the algorithm's choice), true or false"),
         "bootstrap_truncation": dict(type=_none_or(_bool), help="none (no on the built-in mazes), true or false"),
+        "reuse_adapt": dict(type=_none_or(str), help="none (Eq. 9 as written), gradient, gradient_sign or "
+                                                     "gradient_test (oapo_lite/adaptive.py)"),
         "seps_clusters": dict(type=_none_or(int), help="none (chosen by the Davies-Bouldin index) or a number"),
         "env": dict(type=str, help=f"a built-in map {sorted(MAPS)}, a path to a map text file, or "
                                    "<engine>:<name> of a real engine, e.g. smax:3m, mamujoco:HalfCheetah-2x3, "

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from oapo_lite import reuse
+from oapo_lite import adaptive, reuse
 from oapo_lite.a2c import Learner as A2CLearner
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.core import VecMaze
@@ -90,6 +90,9 @@ class TrainConfig:
     reuse_mode: str = "weights"
     allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
     shared: bool | None = None  # one network for all seats; None: the algorithm's own choice
+    # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
+    # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
+    reuse_adapt: str | None = None
     kl_threshold: float = 0.01  # TRPO delta
     cg_iters: int = 10
     cg_damping: float = 0.1
@@ -138,6 +141,16 @@ class TrainConfig:
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
         for name in ("shared", "bootstrap_truncation"):
             need(getattr(self, name) in (None, True, False), name, "None, True or False")
+        need(self.reuse_adapt is None or self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
+             f"None or one of {list(adaptive.ADAPT_RULES)}")
+        if self.reuse_adapt is not None:
+            # the rule rescales Eq. 9's matrix between separate learners; others have no Eq. 9 to adapt
+            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
+            need(ALGOS[self.algo].reuse == "oapo", "reuse_adapt",
+                 f"None with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
+            need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
+            need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
+                 f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
         if isinstance(self.allowed, str):
             need(self.allowed in SCHEMES, "allowed", f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
         elif self.allowed is not None:
@@ -431,6 +444,40 @@ def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: s
     return _finite_distances(K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy())
 
 
+def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarray, adv: torch.Tensor,
+                     clip: float | None, folds: int = 1) -> np.ndarray:
+    """(n, n, folds, P): row i, column j is the gradient, in learner i's parameters as they are
+    now, of its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on
+    source j's samples alone, with the factor rho = 1 (nobody has moved yet); with ``folds`` > 1,
+    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. Sources
+    that M[i] gives no weight get zeros (the adaptive rule only rescales what Eq. 9 allows).
+    Separate nets only."""
+    n, n_envs = M.shape[0], batch.reward.shape[1]
+    if not 1 <= folds <= n_envs:
+        raise ValueError(f"folds = {folds!r} must lie in [1, n_envs = {n_envs}]")
+    size = sum(p.numel() for p in actors.net_params(0))
+    grads = np.zeros((n, n, folds, size))
+    ones = torch.ones(1)
+    # sample b is step b // n_envs of env copy b % n_envs (``_per_agent``)
+    fold_of = torch.arange(adv.shape[0]) % n_envs % folds
+    for i in range(n):
+        src = Sources.of(i, M, list(range(n)), batch)
+        params = actors.net_params(i)
+        logp = actors.head.log_prob(learner_dists(actors, inputs, src), src.act)
+        for r, j in enumerate(src.rows):
+            for f in range(folds):
+                active = None if src.active is None else src.active[r:r + 1]
+                if folds > 1:  # one fold alone; with one fold the plain mean, bit for bit
+                    active = (fold_of == f)[None] if active is None else active & (fold_of == f)[None]
+                obj = off_agent_objective(logp[r:r + 1], src.logp_old[r:r + 1], ones, torch.ones_like(adv), adv,
+                                          clip, active)
+                last = r + 1 == len(src.rows) and f + 1 == folds
+                g = torch.autograd.grad(obj, params, retain_graph=not last)
+                grads[i, j, f] = torch.cat([x.reshape(-1) for x in g]).double().numpy()
+    check_finite(grads, "a source gradient of the adaptive reuse rule", "all")
+    return grads
+
+
 def _finite_distances(K: np.ndarray) -> np.ndarray:
     bad = np.argwhere(~np.isfinite(K))
     if len(bad):
@@ -651,6 +698,11 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                 adv, returns, v_old = advantages(critic, value_norm, batch, cfg, bootstrap)
                 K = policy_distances(actors, batch.inputs, owner, cfg.kl_reduce, batch.active)
                 M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, allowed)
+                if cfg.reuse_adapt is not None:
+                    G = source_gradients(actors, batch.inputs, batch, M, adv,
+                                         None if spec.trust_region else cfg.clip, adaptive.folds(cfg.reuse_adapt))
+                    C = adaptive.agreement(G, cfg.reuse_adapt)
+                    M = adaptive.agreement_matrix(M, C, cfg.reuse_adapt)
                 W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, rng)]
                 W = W.mean(0, keepdims=True) if shared else W  # a shared net learns for every seat
                 order = reuse.update_order(n_nets, rng) if spec.sequential else range(n_nets)
@@ -667,6 +719,8 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                 "trpo_kl": _mean_or_nan(accepted), "trpo_accepted": len(accepted),
                 "kl_matrix": json.dumps(np.round(K, 6).tolist()), "reuse_matrix": json.dumps(np.round(M, 6).tolist()),
             }
+            if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
+                metrics["agreement"] = json.dumps(np.round(C, 6).tolist())
         history.append({"iteration": it + 1, "step": (it + 1) * batch_size, **metrics, "trpo_kls": trpo_kls})
         if (it + 1) % cfg.eval_every == 0 or it + 1 == cfg.n_iterations:
             evaluation(it + 1, metrics)
