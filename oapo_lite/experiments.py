@@ -1,4 +1,4 @@
-"""Experiments of Sections 6.1 and 6.2: budgets, the grid of runs behind each figure (``GRID``, data), and a run cache.
+"""Experiments of Section 6: budgets, the grid of runs behind each figure (``GRID``, data), and a run cache.
 
 A figure is a ``Figure`` entry: curves of TrainConfig settings, each trained on every seed of
 a budget. Runs are trained by an executor (``executors``: this machine's processes, or a Ray
@@ -135,10 +135,6 @@ SMAX_MAPS = {
 }
 
 
-def _smax(m: str, **budget) -> tuple[str, dict]:
-    return f"smax:{m}", budget
-
-
 # App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO) and
 # direct reuse (SEAC) on homogeneous agents.
 FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
@@ -168,13 +164,13 @@ GRID = (
     Figure("fig4_smax", tuple((a, dict(algo=a, env=f"smax:{m}", **kw)) for m, kw in SMAX_MAPS.items()
                               for a in SMAX_ALGOS),
            common=SMAX_BATCH, runs_at=ENGINE_BUDGETS, budgets={
-               "smoke": dict(eval_episodes=8, envs=dict([_smax("3m", steps=6_400, eval_every=1)])),
-               "cpu": dict(eval_episodes=64, envs=dict([_smax("3m", steps=300_000, eval_every=10),
-                                                        _smax("2s3z", steps=500_000, eval_every=10)])),
-               "paper": dict(eval_episodes=64, eval_every=25, envs=dict([
-                   _smax("3m", steps=2_000_000), _smax("2s3z", steps=5_000_000),
-                   _smax("6h_vs_8z", steps=40_000_000), _smax("3s5z_vs_3s6z", steps=20_000_000),
-                   _smax("MMM2_like_7m2M_vs_8m3M", steps=20_000_000)])),
+               "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
+               "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
+                                                   "smax:2s3z": dict(steps=500_000, eval_every=10)}),
+               "paper": dict(eval_episodes=64, eval_every=25, envs={
+                   "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
+                   "smax:6h_vs_8z": dict(steps=40_000_000), "smax:3s5z_vs_3s6z": dict(steps=20_000_000),
+                   "smax:MMM2_like_7m2M_vs_8m3M": dict(steps=20_000_000)}),
            }),
     # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
     Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env="mamujoco:HalfCheetah-2x3"),
@@ -308,17 +304,11 @@ class Failure:
                 f"  config (non-default fields): {_changed(self.run.cfg)}\n{self.error.rstrip()}")
 
 
-def _engine_installed(run: Run) -> bool:
-    """False (and says so, once per engine) for a run whose engine is not installed here."""
-    engine = env_registry.split(run.cfg.env)[0]
-    hint = env_registry.missing_engine(engine) if engine and run.cfg.env_fn is None else None
-    if hint and engine not in _SKIPPED:
-        _SKIPPED.add(engine)
-        print(f"skipping the {engine} runs: {hint}", file=sys.stderr)
-    return hint is None
-
-
-_SKIPPED: set[str] = set()
+def _missing_engine(cfg: TrainConfig) -> tuple[str, str] | None:
+    """(engine, how to install it) for a run whose engine is not installed here, else None."""
+    engine = env_registry.split(cfg.env)[0] if cfg.env_fn is None else None
+    hint = env_registry.missing_engine(engine) if engine else None
+    return (engine, hint) if hint else None
 
 
 def _cost(cfg: TrainConfig) -> int:
@@ -346,7 +336,15 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
-    todo = [r for r in grid_runs(budget, figures) if _engine_installed(r)]
+    todo, skipped = [], {}
+    for run in grid_runs(budget, figures):
+        missing_engine = _missing_engine(run.cfg)
+        if missing_engine:
+            skipped.setdefault(*missing_engine)
+        else:
+            todo.append(run)
+    for engine, hint in skipped.items():
+        print(f"skipping the {engine} runs: {hint}", file=sys.stderr)
     # seed by seed, so that an interrupted grid has every curve at a few seeds before any at many;
     # within a seed longest first (steps x agents), so that no long run starts last while the
     # other worker idles

@@ -119,8 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     from oapo_lite import experiments
 
     parser = argparse.ArgumentParser(prog="python -m oapo_lite reproduce", description=__doc__)
-    parser.add_argument("--budget", default="smoke",
-                        help=f"one of {sorted(experiments.BUDGETS)}")
+    parser.add_argument("--budget", default="smoke", help=f"one of {sorted(experiments.BUDGETS)}")
     parser.add_argument("--inplace", action="store_true",
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
