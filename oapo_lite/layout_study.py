@@ -1,7 +1,8 @@
 """The layout study's grid (issue 12): which runs, on which generated layouts, at a budget.
 
 For every layout of ``envs.layouts.LAYOUTS``: OAPPO (sigma 0.1, lambda 0.7) against HAPPO for
-steps to 95% of the optimum, MAPPO's final level, and OAPPO at lambda in {0.2, 0.4, 0.7, 1}.
+steps to 95% of the optimum, MAPPO's final level, OAPPO at lambda in {0.2, 0.4, 0.7, 1}, and
+the adaptive reuse rule (``adaptive.py``) with its one setting for all layouts.
 Runs share the cache of ``experiments`` (``<data>/runs/<run id>.csv``), so a run is trained
 once whichever family lists its layout. Training is one process at a time.
 """
@@ -14,9 +15,11 @@ from oapo_lite.envs.layouts import LAYOUTS
 from oapo_lite.train import TrainConfig
 
 LAMBDAS = experiments.LAMBDAS
+ADAPTIVE = "oappo adaptive"  # gradient_test at the default sigma and lambda, the rule's one setting
 # curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
 CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
-    f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam}
+    f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam} | {
+    ADAPTIVE: dict(algo="oappo", reuse_adapt="gradient_test")}
 
 
 def figures(layouts=None) -> list[experiments.Figure]:
