@@ -46,6 +46,9 @@ BUDGETS = {
 # override it per figure (``Figure.budgets``) with what fits in one or two hours.
 BUDGETS["cpu"] = BUDGETS["paper"]
 COMMITTED = ("paper", "cpu")  # the budgets whose figures and runs are committed under figures/
+# paper20's figures go to figures/paper20/, but its runs share the committed cache: a run id
+# hashes the run's whole config, so its seeds 0-4 are the paper budget's runs, trained once.
+SHARED_RUNS = COMMITTED + ("paper20",)
 
 
 def get_budget(name: str) -> Budget:
@@ -66,6 +69,11 @@ def figures_dir(budget: str) -> Path:
 
 def data_dir(budget: str) -> Path:
     return figures_dir(budget) / "data"
+
+
+def runs_dir(budget: str) -> Path:
+    """Where a budget's finished runs (``<run id>.csv``) and their checkpoints are cached."""
+    return data_dir(COMMITTED[0] if budget in SHARED_RUNS else budget)
 
 
 # Section 6.1's figures: which curves, with which settings.
@@ -276,7 +284,7 @@ def run_id(cfg: TrainConfig) -> str:
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
-    return data_dir(budget) / "runs" / f"{run_id(cfg)}.csv"
+    return runs_dir(budget) / "runs" / f"{run_id(cfg)}.csv"
 
 
 def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
@@ -350,7 +358,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     # other worker idles
     missing = sorted((r for r in todo if not run_path(r.cfg, budget).exists()),
                      key=lambda r: (r.cfg.seed, -_cost(r.cfg)))
-    checkpoints = data_dir(budget) / "checkpoints"
+    checkpoints = runs_dir(budget) / "checkpoints"
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
     jobs = [(run, str(checkpoints / run_id(run.cfg))) for run in missing]

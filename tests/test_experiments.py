@@ -39,6 +39,10 @@ def test_paper20_is_paper_with_twenty_seeds():
     for fig in experiments.MAZE_FIGURES:
         ids = {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper20")}
         assert {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper")} <= ids
+        # ... and they are trained once: both budgets read the same cache, each writes its own figures
+        for _, c in experiments.figure_runs(fig, "paper"):
+            assert experiments.run_path(c, "paper20") == experiments.run_path(c, "paper")
+    assert experiments.figures_dir("paper20") != experiments.figures_dir("paper")
 
 
 def test_the_grid_keeps_every_committed_maze_run_valid():
