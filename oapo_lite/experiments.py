@@ -91,6 +91,8 @@ A2C_ENVS = 16
 A2C_ALGOS = ("seac", "seps")
 BASELINE_ALGOS = ("seac", "seps", "mappo", "happo", "oappo")
 MAZES = ("black_red", "black_blue_red")
+ADAPTIVE_CURVES = (("oappo adaptive", dict(algo="oappo", reuse_adapt="gradient_test")),
+                   ("oappo", dict(algo="oappo")), ("happo", dict(algo="happo")))
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,9 @@ GRID = (
     Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
     # label: the algorithm; the maze is the ``env`` column
     Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
+    # Issue 12's adaptive reuse rule against the fixed Eq. 9 (sigma 0.1, lambda 0.7: the best of
+    # Fig. 3c-d's grid) and no reuse, on both paper mazes
+    Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)),
     # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
     # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
     # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).

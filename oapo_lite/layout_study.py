@@ -15,11 +15,11 @@ from oapo_lite.envs.layouts import LAYOUTS
 from oapo_lite.train import TrainConfig
 
 LAMBDAS = experiments.LAMBDAS
-ADAPTIVE = "oappo adaptive"  # gradient_test at the default sigma and lambda, the rule's one setting
+ADAPTIVE = experiments.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
 # curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
 CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
     f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam} | {
-    ADAPTIVE: dict(algo="oappo", reuse_adapt="gradient_test")}
+    ADAPTIVE: dict(experiments.ADAPTIVE_CURVES[0][1])}
 
 
 def figures(layouts=None) -> list[experiments.Figure]:
