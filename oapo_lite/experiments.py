@@ -169,8 +169,10 @@ GRID = (
     # label: the algorithm; the maze is the ``env`` column
     Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
     # Issue 12's adaptive reuse rule against the fixed Eq. 9 (sigma 0.1, lambda 0.7: the best of
-    # Fig. 3c-d's grid) and no reuse, on both paper mazes
-    Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)),
+    # Fig. 3c-d's grid) and no reuse, on both paper mazes; and both at lambda 0.4 on Black-Red,
+    # where the fixed rule is trapped (Fig. 3d)
+    Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)
+           + tuple((f"{label} lambda=0.4", dict(env="black_red", lam=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2])),
     # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
     # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
     # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pandas as pd
 
 from oapo_lite import experiments, verdicts
-from oapo_lite.envs.layouts import LAYOUTS
+from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
 from oapo_lite.train import TrainConfig
 
 LAMBDAS = experiments.LAMBDAS
@@ -39,7 +39,8 @@ def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
 
 
 def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
-    """Tidy rows of the study (training missing runs first, one at a time, if asked)."""
+    """Tidy rows of the study (training missing runs first, one at a time, if asked); the
+    whole study's rows are also written to ``<data>/fig_layout_study.csv``."""
     if run_missing:
         failed = experiments.run_all(budget, figures=figures(layouts), workers=1, progress=False).failed
         if failed:
@@ -50,7 +51,20 @@ def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
         if not path.exists():
             raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: {path}")
         frames.append(pd.read_csv(path).assign(layout=name, label=label))
-    return pd.concat(frames, ignore_index=True)
+    df = pd.concat(frames, ignore_index=True)
+    if layouts is None:
+        experiments.write_csv_atomic(df, experiments.data_dir(budget) / "fig_layout_study.csv")
+    return df
+
+
+def describe() -> pd.DataFrame:
+    """Per layout (row): what the oracle measures on the map, and for each family the value it
+    varies there (column "<family> family"; NaN if the layout is not in it)."""
+    rows = {name: measure(load_layout(name)) for name in sorted(LAYOUTS)}
+    for family, (forks, attribute) in FAMILIES.items():
+        for fork in forks:
+            rows[fork.name][f"{family} family"] = getattr(fork, attribute)
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")
 
 
 def table(df: pd.DataFrame) -> pd.DataFrame:
@@ -66,4 +80,35 @@ def oappo_vs_happo(df: pd.DataFrame) -> pd.DataFrame:
     for name, runs in df.groupby("layout", sort=False):
         p = verdicts.Evidence(runs).improvement("oappo", "happo", "steps")
         rows[name] = {"p_oappo_faster": p.point, "low": p.low, "high": p.high}
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")
+
+
+def trapped(df: pd.DataFrame, threshold: float = verdicts.THRESHOLD) -> pd.DataFrame:
+    """Per layout (rows) and curve (columns): the seeds whose final level stayed below
+    ``threshold`` of the optimum."""
+    runs = pd.concat({name: verdicts.per_run(rows, threshold) for name, rows in df.groupby("layout", sort=False)},
+                     names=["layout", None]).reset_index(level=0)
+    return (runs["final_frac"] < threshold).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
+
+
+def fixed_curves() -> list[str]:
+    """The fixed Eq. 9 settings of the study's grid: OAPPO at every lambda (sigma 0.1)."""
+    return [label for label, kw in CURVES.items() if kw.get("algo") == "oappo" and "reuse_adapt" not in kw]
+
+
+def adaptive_vs_best_fixed(df: pd.DataFrame, adaptive: str = ADAPTIVE) -> pd.DataFrame:
+    """Per layout (or per maze, with ``df`` grouped by "layout"): the fixed setting that was
+    fastest there (lowest IQM of steps to 95%, chosen on the same seeds, which favours it),
+    P(adaptive reaches 95% in fewer steps than it) with its interval, and the seeds of each
+    that stayed trapped below 95%, with HAPPO's."""
+    rows = {}
+    for name, runs in df.groupby("layout", sort=False):
+        ev = verdicts.Evidence(runs)
+        fixed = [c for c in fixed_curves() if c in ev.summary.index]
+        best = min(fixed, key=lambda c: (ev.level(c, "steps").point, -ev.level(c, "final").point))
+        p = ev.improvement(adaptive, best, "steps")
+        stuck = {c: int((ev.values(c, "final") < ev.threshold).sum()) for c in (adaptive, best, "happo")}
+        rows[name] = {"best_fixed": best, "p_faster": p.point, "low": p.low, "high": p.high,
+                      "adaptive_steps": ev.level(adaptive, "steps").point, "best_steps": ev.level(best, "steps").point,
+                      "trapped_adaptive": stuck[adaptive], "trapped_best": stuck[best], "trapped_happo": stuck["happo"]}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")

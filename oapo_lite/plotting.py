@@ -39,6 +39,24 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     return ax
 
 
+def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=None, title=None, ylabel=None):
+    """IQM over seeds of ``metric`` ("steps" or "final") with its 95% interval, per curve,
+    against a layout parameter ``x`` (indexed by layout). ``table``: ``layout_study.table``."""
+    ax = ax or plt.subplots(figsize=(5, 4))[1]
+    x = x.dropna()
+    order = sorted(x.index, key=lambda name: x[name])
+    ticks = np.arange(len(order))
+    for k, label in enumerate(labels):
+        rows = table.xs(label, level="label").reindex(order)
+        mid, low, high = (rows[f"{metric}_{c}"].to_numpy(float) for c in ("iqm", "low", "high"))
+        shift = (k - (len(labels) - 1) / 2) * 0.08  # side by side, so overlapping intervals stay readable
+        ax.errorbar(ticks + shift, mid, yerr=[mid - np.fmin(low, mid), np.fmax(high, mid) - mid], marker="o",
+                    capsize=3, label=str(label))
+    ax.set_xticks(ticks, [str(x[name]) for name in order])
+    ax.set(title=title, ylabel=ylabel)
+    return ax
+
+
 def reuse_heatmap(m: np.ndarray, ax=None, title=None, names=None):
     """Fig. 2a-c: the reuse matrix, M[i, j] = P(learner i trains on agent j's experience)."""
     ax = ax or plt.subplots(figsize=(3.5, 3.5))[1]
