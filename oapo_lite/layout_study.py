@@ -97,18 +97,20 @@ def fixed_curves() -> list[str]:
 
 
 def adaptive_vs_best_fixed(df: pd.DataFrame, adaptive: str = ADAPTIVE) -> pd.DataFrame:
-    """Per layout (or per maze, with ``df`` grouped by "layout"): the fixed setting that was
+    """Per layout (or per maze: any frame with a "layout" column): the fixed setting that was
     fastest there (lowest IQM of steps to 95%, chosen on the same seeds, which favours it),
-    P(adaptive reaches 95% in fewer steps than it) with its interval, and the seeds of each
-    that stayed trapped below 95%, with HAPPO's."""
+    P(``adaptive`` reaches 95% in fewer steps than it) and P(... than HAPPO) with their
+    intervals, and the seeds of each of the three that stayed trapped below 95%."""
     rows = {}
     for name, runs in df.groupby("layout", sort=False):
         ev = verdicts.Evidence(runs)
         fixed = [c for c in fixed_curves() if c in ev.summary.index]
         best = min(fixed, key=lambda c: (ev.level(c, "steps").point, -ev.level(c, "final").point))
-        p = ev.improvement(adaptive, best, "steps")
+        p, p_happo = (ev.improvement(adaptive, other, "steps") for other in (best, "happo"))
         stuck = {c: int((ev.values(c, "final") < ev.threshold).sum()) for c in (adaptive, best, "happo")}
         rows[name] = {"best_fixed": best, "p_faster": p.point, "low": p.low, "high": p.high,
+                      "p_vs_happo": p_happo.point, "low_happo": p_happo.low, "high_happo": p_happo.high,
                       "adaptive_steps": ev.level(adaptive, "steps").point, "best_steps": ev.level(best, "steps").point,
-                      "trapped_adaptive": stuck[adaptive], "trapped_best": stuck[best], "trapped_happo": stuck["happo"]}
+                      "trapped_adaptive": stuck[adaptive], "trapped_best": stuck[best], "trapped_happo": stuck["happo"],
+                      "seeds": len(ev.values(adaptive, "final"))}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")

@@ -28,16 +28,33 @@ def test_unknown_layout_and_missing_runs_raise(tmp_path, monkeypatch):
 
 
 def test_tables_read_the_runs(tmp_path, monkeypatch):
-    # fake finished runs: OAPPO reaches the optimum at 32k steps on every seed, HAPPO at 64k
+    # fake finished runs: OAPPO reaches the optimum at 32k steps on every seed, the adaptive rule
+    # at 48k, lambda = 0.2 stays at 20% of it, every other curve reaches it at 64k
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     name = sorted(LAYOUTS)[0]
     steps = np.arange(0, 240_001, 16_000)
+    reach = {"oappo": 32_000, layout_study.ADAPTIVE: 48_000}
     for _, label, cfg in layout_study.study_runs("paper", [name]):
-        reach = 32_000 if label == "oappo" else 64_000
+        frac = np.minimum(steps / reach.get(label, 64_000), 1.0) * (0.2 if label == "oappo lambda=0.2" else 1.0)
         path = experiments.run_path(cfg, "paper")
         path.parent.mkdir(parents=True, exist_ok=True)
-        pd.DataFrame({"step": steps, "frac_opt": np.minimum(steps / reach, 1.0), "seed": cfg.seed}).to_csv(path, index=False)
+        pd.DataFrame({"step": steps, "frac_opt": frac, "seed": cfg.seed}).to_csv(path, index=False)
     df = layout_study.load("paper", [name], run_missing=False)
     table = layout_study.table(df)
     assert table.loc[(name, "oappo"), "steps_iqm"] == 32_000 and table.loc[(name, "happo"), "steps_iqm"] == 64_000
     assert layout_study.oappo_vs_happo(df).loc[name].tolist() == [1.0, 1.0, 1.0]
+    stuck = layout_study.trapped(df).loc[name]
+    assert stuck["oappo lambda=0.2"] == 5 and stuck.drop("oappo lambda=0.2").eq(0).all()
+    vs = layout_study.adaptive_vs_best_fixed(df).loc[name]
+    assert vs["best_fixed"] == "oappo" and (vs["p_faster"], vs["high"]) == (0.0, 0.0)  # slower on every seed
+    assert (vs["p_vs_happo"], vs["low_happo"]) == (1.0, 1.0)
+    assert (vs["adaptive_steps"], vs["best_steps"], vs["trapped_adaptive"], vs["seeds"]) == (48_000, 32_000, 0, 5)
+
+
+def test_describe_names_what_each_family_varies():
+    desc = layout_study.describe()
+    assert sorted(desc.index) == sorted(LAYOUTS)
+    base = "fork-p2-c3-b4-s3-h3"  # in every family
+    assert desc.loc[base, ["first_move family", "shared_prefix family", "conflicts family"]].tolist() == ["shared", 2, 3]
+    assert desc["conflicts family"].dropna().to_dict() == {f"fork-p2-c{c}-b4-s3-h3": c for c in (1, 3, 5, 7)}
+    assert (desc["route_red"] == 16).all() and (desc["route_black"] == 16).all()
