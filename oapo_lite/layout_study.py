@@ -40,7 +40,8 @@ def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
 
 def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
     """Tidy rows of the study (training missing runs first, one at a time, if asked); the
-    whole study's rows are also written to ``<data>/fig_layout_study.csv``."""
+    whole study's runs, one row each (``per_run``), are also written to
+    ``<data>/fig_layout_study.csv``: what its figure is drawn from."""
     if run_missing:
         failed = experiments.run_all(budget, figures=figures(layouts), workers=1, progress=False).failed
         if failed:
@@ -53,8 +54,23 @@ def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
         frames.append(pd.read_csv(path).assign(layout=name, label=label))
     df = pd.concat(frames, ignore_index=True)
     if layouts is None:
-        experiments.write_csv_atomic(df, experiments.data_dir(budget) / "fig_layout_study.csv")
+        experiments.write_csv_atomic(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")
     return df
+
+
+RUN_FIELDS = ["algo", "env", "sigma", "lam", "reuse_adapt", "steps", "git_rev"]  # what identifies a run
+
+
+def per_run(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per run: layout, curve, seed, its config's defining fields and revision, and
+    ``verdicts.per_run``'s steps to 95% of the optimum and final level."""
+    runs = pd.concat({name: verdicts.per_run(rows) for name, rows in df.groupby("layout", sort=False)},
+                     names=["layout", None]).reset_index(level=0).reset_index(drop=True)
+    fields = [c for c in RUN_FIELDS if c in df.columns]
+    if fields:
+        runs = runs.merge(df.groupby(["layout", "label", "seed"], sort=False)[fields].first().reset_index(),
+                          on=["layout", "label", "seed"], how="left")
+    return runs
 
 
 def describe() -> pd.DataFrame:
@@ -83,12 +99,11 @@ def oappo_vs_happo(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")
 
 
-def trapped(df: pd.DataFrame, threshold: float = verdicts.THRESHOLD) -> pd.DataFrame:
-    """Per layout (rows) and curve (columns): the seeds whose final level stayed below
-    ``threshold`` of the optimum."""
-    runs = pd.concat({name: verdicts.per_run(rows, threshold) for name, rows in df.groupby("layout", sort=False)},
-                     names=["layout", None]).reset_index(level=0)
-    return (runs["final_frac"] < threshold).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
+def trapped(df: pd.DataFrame) -> pd.DataFrame:
+    """Per layout (rows) and curve (columns): the seeds whose final level stayed below 95% of
+    the optimum."""
+    runs = per_run(df)
+    return (runs["final_frac"] < verdicts.THRESHOLD).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
 
 
 def fixed_curves() -> list[str]:

@@ -43,6 +43,9 @@ def test_tables_read_the_runs(tmp_path, monkeypatch):
     table = layout_study.table(df)
     assert table.loc[(name, "oappo"), "steps_iqm"] == 32_000 and table.loc[(name, "happo"), "steps_iqm"] == 64_000
     assert layout_study.oappo_vs_happo(df).loc[name].tolist() == [1.0, 1.0, 1.0]
+    runs = layout_study.per_run(df)
+    assert len(runs) == 7 * 5 and set(runs["layout"]) == {name}
+    assert (runs.loc[runs["label"] == "oappo", "steps_to_threshold"] == 32_000).all()
     stuck = layout_study.trapped(df).loc[name]
     assert stuck["oappo lambda=0.2"] == 5 and stuck.drop("oappo lambda=0.2").eq(0).all()
     vs = layout_study.adaptive_vs_best_fixed(df).loc[name]
