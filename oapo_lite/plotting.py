@@ -39,9 +39,11 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     return ax
 
 
-def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=None, title=None, ylabel=None):
+def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=None, title=None, ylabel=None,
+                   colors: dict | None = None):
     """IQM over seeds of ``metric`` ("steps" or "final") with its 95% interval, per curve,
-    against a layout parameter ``x`` (indexed by layout). ``table``: ``layout_study.table``."""
+    against a layout parameter ``x`` (indexed by layout). ``table``: ``layout_study.table``;
+    ``colors``: label -> colour, so that a curve keeps its colour across panels."""
     ax = ax or plt.subplots(figsize=(5, 4))[1]
     x = x.dropna()
     order = sorted(x.index, key=lambda name: x[name])
@@ -51,8 +53,8 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
         mid, low, high = (rows[f"{metric}_{c}"].to_numpy(float) for c in ("iqm", "low", "high"))
         shift = (k - (len(labels) - 1) / 2) * 0.08  # side by side, so overlapping intervals stay readable
         ax.errorbar(ticks + shift, mid, yerr=[mid - np.fmin(low, mid), np.fmax(high, mid) - mid], marker="o",
-                    capsize=3, label=str(label))
-    ax.set_xticks(ticks, [str(x[name]) for name in order])
+                    capsize=3, label=str(label), color=(colors or {}).get(label))
+    ax.set_xticks(ticks, [f"{x[name]:g}" if isinstance(x[name], float) else str(x[name]) for name in order])
     ax.set(title=title, ylabel=ylabel)
     return ax
 
