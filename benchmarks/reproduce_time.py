@@ -1,12 +1,15 @@
 """Wall time of the whole maze reproduction at a budget (default: paper), from nothing.
 
-Runs `python -m oapo_lite reproduce` with every result written to a fresh temporary folder
-(OAPO_FIGURES), so nothing is cached and the committed figures are not touched. Prints the
-reproduction's own summary, the total wall time and the CPU time of all its processes (on a
-machine shared with other jobs the wall time grows, the CPU time much less).
+Runs `python -m oapo_lite reproduce` on the maze figures (`experiments.MAZE_FIGURES`; the
+real engines' paper runs are a cluster's work) with every result written to a fresh
+temporary folder (OAPO_FIGURES), so nothing is cached and the committed figures are not
+touched. Prints the reproduction's own summary, the total wall time and the CPU time of all
+its processes (on a machine shared with other jobs the wall time grows, the CPU time much
+less). From an empty cache, notebook 16 trains the layout study's 315 runs one at a time;
+`--skip-notebooks` times the figures' training runs alone.
 
     .venv/bin/python benchmarks/reproduce_time.py [--budget paper] [--workers 2] [--executor ray]
-        [--address HOST:PORT] [--skip-notebooks]
+        [--address HOST:PORT] [--skip-notebooks] [--figures FIGURE ...]
 """
 import argparse
 import os
@@ -16,14 +19,17 @@ import sys
 import tempfile
 import time
 
+from oapo_lite.experiments import MAZE_FIGURES
+
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")
 parser.add_argument("--workers", type=int, default=2)
 parser.add_argument("--executor", default="local", choices=["local", "ray"])
 parser.add_argument("--address", default=None, help="Ray cluster (default: a private one on this machine)")
 parser.add_argument("--skip-notebooks", action="store_true", help="time the training runs only")
+parser.add_argument("--figures", nargs="+", default=list(MAZE_FIGURES), help="the figures whose runs are trained")
 args = parser.parse_args()
-extra = ["--executor", args.executor] + (["--address", args.address] if args.address else []) \
+extra = ["--figures", *args.figures, "--executor", args.executor] + (["--address", args.address] if args.address else []) \
     + (["--skip-notebooks"] if args.skip_notebooks else [])
 
 with tempfile.TemporaryDirectory() as tmp:

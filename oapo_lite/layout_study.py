@@ -1,4 +1,5 @@
-"""The layout study's grid (issue 12): which runs, on which generated layouts, at a budget.
+"""The layout study (issue 12): which runs, on which generated layouts, at a budget, and the
+tables its figure and notebook 16 read from them.
 
 For every layout of ``envs.layouts.LAYOUTS``: OAPPO (sigma 0.1, lambda 0.7) against HAPPO for
 steps to 95% of the optimum, MAPPO's final level, OAPPO at lambda in {0.2, 0.4, 0.7, 1}, and
