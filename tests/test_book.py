@@ -142,3 +142,14 @@ def test_every_page_loads_cleanly_with_its_images_and_typeset_math(site, browser
     figures = sum(1 for p in notebook_paths() for c in nbformat.read(p, 4).cells if c.cell_type == "code"
                   for o in c.outputs if "image/png" in o.get("data", {}))
     assert images_seen >= figures > 0
+
+
+def test_notebook_text_has_no_control_characters():
+    """A control character in a markdown cell is a LaTeX command eaten by a Python string
+    escape (\\frac -> form feed + "rac"); MathJax may still typeset what is left, wrongly."""
+    from oapo_lite.reproduce import notebook_paths
+
+    for path in notebook_paths():
+        for k, cell in enumerate(nbformat.read(path, as_version=4).cells):
+            bad = sorted({repr(c) for c in cell.source if ord(c) < 32 and c != "\n"})
+            assert not bad, f"{path.name} cell {k}: control characters {bad}"
