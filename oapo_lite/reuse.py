@@ -25,6 +25,14 @@ def happo_matrix(n: int) -> np.ndarray:
     return np.eye(_check_n(n))
 
 
+def peer_share(m) -> float:
+    """How much of the learners' updates comes from other agents' experience: the off-diagonal
+    mass of M's rows, averaged over learners (0 for HAPPO, (n - 1) / n for MAPPO, 1 - lambda
+    for Eq. 9 with every peer within sigma)."""
+    m = np.asarray(m, dtype=float)
+    return float(m[~np.eye(len(m), dtype=bool)].sum() / len(m))
+
+
 def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | None = None) -> np.ndarray:
     """Eq. 9: the reuse distribution of every learner, one row each.
 

@@ -137,3 +137,11 @@ def test_matrix_for_dispatches_and_rejects_unknown_kinds():
     assert np.allclose(reuse.matrix_for("uniform", kl, 0.2, 0.6), 1 / 3)
     with pytest.raises(ValueError, match="unknown reuse kind 'shared'"):
         reuse.matrix_for("shared", kl, 0.2, 0.6)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5])
+def test_peer_share_of_the_three_rules(n):
+    assert reuse.peer_share(reuse.happo_matrix(n)) == 0.0
+    assert np.isclose(reuse.peer_share(reuse.mappo_matrix(n)), (n - 1) / n)
+    close = reuse.oapo_matrix(np.zeros((n, n)), sigma=0.1, lam=0.7)  # every peer within sigma
+    assert np.isclose(reuse.peer_share(close), 0.0 if n == 1 else 0.3)
