@@ -4,7 +4,12 @@ or ``python -m oapo_lite book`` (the notebooks as a static site).
     python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --lam 0.7 --out runs/
     python -m oapo_lite train --algo oappo --env smax:3m --n-envs 64 --max-steps 100 --steps 300000
 
-Every ``TrainConfig`` field is a flag; the run goes to ``<out>/<algo>_<env>_s<seed>/``.
+Every ``TrainConfig`` field is a flag; the run goes to ``<out>/<algo>-<env>-s<seed>-<config hash>/``
+(the name the run cache uses), so runs that differ in any setting never share a folder.
+
+Errors in what you asked for (a bad value, a damaged checkpoint, a folder that cannot be
+written, a run that diverged) are one line on stderr, exit status 2. ``--debug`` (anywhere on
+the line) or ``OAPO_DEBUG=1`` shows the Python traceback instead.
 """
 from __future__ import annotations
 
@@ -14,7 +19,8 @@ import sys
 import time
 from pathlib import Path
 
-from oapo_lite.envs.maps import MAPS
+from oapo_lite import cli
+from oapo_lite.envs.maps import MAPS, parse_maze
 
 
 def _none_or(kind):
@@ -30,7 +36,7 @@ def _bool(text: str) -> bool:
 def train_parser() -> argparse.ArgumentParser:
     from oapo_lite.train import TrainConfig
 
-    parser = argparse.ArgumentParser(prog="python -m oapo_lite train", description="Train one run.")
+    parser = cli.Parser(prog="python -m oapo_lite train", description="Train one run.")
     special = {
         "hidden": dict(type=int, nargs="+"),
         "allowed": dict(type=_none_or(str), help="none or a scheme: NR, UR, RR, AR"),
@@ -56,25 +62,25 @@ def train_parser() -> argparse.ArgumentParser:
 
 
 def train_main(argv: list[str]) -> int:
+    from oapo_lite.experiments import run_id
     from oapo_lite.train import TrainConfig, train
 
     args = vars(train_parser().parse_args(argv))
     out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")
-    name = args["env"]
+    name, file_name = args["env"], None
     if name not in MAPS and Path(name).is_file():
-        args["env"], name = Path(name).read_text(), Path(name).stem
-    try:
-        cfg = TrainConfig(**args)
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    run_dir = out / f"{cfg.algo}_{name.replace(':', '-')}_s{cfg.seed}"
+        path = Path(name)
+        try:
+            args["env"] = path.read_text()
+        except (OSError, UnicodeDecodeError) as err:
+            raise ValueError(f"cannot read the map file {path}: {err}") from None
+        parse_maze(args["env"], name=str(path))  # its errors name the file
+        name = file_name = path.stem
+    cfg = TrainConfig(**args)
+    run_dir = out / run_id(cfg, file_name)
+    print(f"run folder: {run_dir}", flush=True)
     start = time.perf_counter()
-    try:
-        rows = train(cfg, run_dir, resume=resume, progress=progress)
-    except ImportError as err:  # an optional engine that is not installed says how to install it
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    rows = train(cfg, run_dir, resume=resume, progress=progress)
     wall = time.perf_counter() - start
     last = rows.iloc[-1]
     hit = rows.loc[rows["frac_opt"] >= 0.95, "step"]
@@ -89,21 +95,37 @@ def train_main(argv: list[str]) -> int:
     return 0
 
 
+def _reproduce(argv: list[str]) -> int:
+    from oapo_lite.reproduce import main as reproduce_main
+
+    return reproduce_main(argv)
+
+
+def _book(argv: list[str]) -> int:
+    from oapo_lite.book import main as book_main
+
+    return book_main(argv)
+
+
+COMMANDS = {"train": train_main, "reproduce": _reproduce, "book": _book}
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    commands = {"train": train_main}
-    if argv and argv[0] == "reproduce":
-        from oapo_lite.reproduce import main as reproduce_main
-
-        return reproduce_main(argv[1:])
-    if argv and argv[0] == "book":
-        from oapo_lite.book import main as book_main
-
-        return book_main(argv[1:])
-    if not argv or argv[0] not in commands:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    debug = cli.debug_requested(argv)
+    argv = [a for a in argv if a != "--debug"]
+    if not argv or argv[0] not in COMMANDS:
         print(__doc__.strip(), file=sys.stderr)
         return 2
-    return commands[argv[0]](argv[1:])
+    try:
+        return COMMANDS[argv[0]](argv[1:])
+    except KeyboardInterrupt:
+        print("interrupted; run the same command again to resume", file=sys.stderr)
+        return 130
+    except Exception as err:
+        if debug:
+            raise
+        return cli.report(err)
 
 
 if __name__ == "__main__":

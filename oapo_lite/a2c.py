@@ -153,13 +153,6 @@ class Learner:
     network per cluster. ``owner`` (seat -> network) is what collect() and evaluate() use."""
 
     def __init__(self, cfg, env, actors: Actors, gen: torch.Generator):
-        if cfg.bootstrap_truncation:
-            raise ValueError("bootstrap_truncation = True is not available for seac / seps: their n-step returns "
-                             "end at a truncation like at a termination (the reference code's default); "
-                             "allowed: None or False")
-        if cfg.shared is not None:
-            raise ValueError(f"shared = {cfg.shared} is not available for seac / seps (SEAC has one network per "
-                             "agent, SePS chooses its groups); allowed: None")
         n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
         if self.seps and cfg.seps_clusters is not None and not 1 <= cfg.seps_clusters <= n:
             raise ValueError(f"seps_clusters = {cfg.seps_clusters} is invalid for {n} agents; allowed: None or 1..{n}")

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import nbformat
 
+from oapo_lite import cli
 from oapo_lite.reproduce import NOTEBOOKS, ROOT, notebook_paths
 
 OVERVIEW = "00_overview"
@@ -111,7 +112,7 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m oapo_lite book", description=__doc__,
+    parser = cli.Parser(prog="python -m oapo_lite book", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default=str(ROOT / "build" / "book"), help="folder of the built site")
     args = parser.parse_args(argv)

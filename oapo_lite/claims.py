@@ -14,7 +14,7 @@ SEED_BUDGETS = ("paper", "paper20")  # 5 and 20 seeds per curve, otherwise ident
 
 def on_disk(figure: str, budget: str) -> bool:
     """Every run of ``figure`` at ``budget`` has finished and been written."""
-    return all(experiments.run_path(cfg, budget).exists() for _, cfg in experiments.figure_runs(figure, budget))
+    return all(experiments.on_disk(cfg, budget) for _, cfg in experiments.figure_runs(figure, budget))
 
 
 def table(figures: tuple[str, ...], budgets: tuple[str, ...] = SEED_BUDGETS) -> pd.DataFrame:

@@ -12,10 +12,13 @@ import os
 import re
 import sys
 import tempfile
+import threading
+import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from oapo_lite.store import DamagedFile
 from oapo_lite.train import git_revision, train
 
 PACKAGE = Path(__file__).resolve().parent
@@ -23,9 +26,14 @@ PACKAGE = Path(__file__).resolve().parent
 
 def train_job(cfg, checkpoints: str):
     """Train one run; (rows, None), or (None, traceback) when it raises: a failed run is
-    reported by the driver while the others go on."""
+    reported by the driver while the others go on. A damaged checkpoint is named and the run
+    trained again from the start (the cache's runs are deterministic)."""
     try:
-        rows = train(cfg, checkpoints, progress=False)
+        try:
+            rows = train(cfg, checkpoints, progress=False)
+        except DamagedFile as err:
+            print(f"warning: {err}; training the run again from the start", file=sys.stderr, flush=True)
+            rows = train(cfg, checkpoints, resume=False, progress=False)
     except Exception:
         return None, traceback.format_exc()
     rows.attrs.clear()  # the per-iteration history is not part of the result; no need to ship it
@@ -42,7 +50,8 @@ def local(jobs, workers: int = 2, address: str | None = None):
         return
     # spawned, not forked: a parent that has imported JAX (SMAX) or started torch's threads
     # cannot fork safely (JAX warns of deadlocks; a forked pool hung the test suite)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
+                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
         for future in as_completed(futures):
             try:
@@ -50,6 +59,18 @@ def local(jobs, workers: int = 2, address: str | None = None):
             except Exception:  # the worker process itself died (killed, out of memory)
                 rows, error = None, traceback.format_exc()
             yield futures[future], rows, error
+
+
+def die_with_parent(parent: int) -> None:
+    """Pool initializer: end this worker once its parent is gone. A driver killed with SIGKILL
+    cannot stop its pool, whose workers would otherwise finish their runs (minutes, ~400 MB
+    each) for nobody."""
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="die-with-parent").start()
 
 
 def check_address(address: str | None) -> None:

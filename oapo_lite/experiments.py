@@ -20,7 +20,8 @@ import pandas as pd
 
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
-from oapo_lite.train import TrainConfig, atomic_write
+from oapo_lite.store import DamagedFile, atomic_write
+from oapo_lite.train import TrainConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -280,18 +281,59 @@ def _changed(cfg: TrainConfig) -> dict:
     return {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
 
 
-def run_id(cfg: TrainConfig) -> str:
-    """Name of a run's cached result: the algorithm, env and seed, and a hash of the fields that
-    differ from ``TrainConfig``'s defaults. Hashing only those keeps every cached run valid when
-    a new field is added with a default that reproduces the old behaviour; changing an existing
+def run_id(cfg: TrainConfig, env_name: str | None = None) -> str:
+    """Name of a run's cached result (and of a command-line run's folder): the algorithm, env
+    (``env_name`` if given: a map file's name) and seed, and a hash of the fields that differ
+    from ``TrainConfig``'s defaults. Hashing only those keeps every cached run valid when a new
+    field is added with a default that reproduces the old behaviour; changing an existing
     default, on the other hand, must come with a new cache (delete ``runs/``)."""
     blob = json.dumps(_changed(cfg), sort_keys=True, default=str)
-    env = cfg.env.replace(":", "_")  # an engine's env spec ("smax:3m") as a portable file name
+    env = env_name or ("map" if "\n" in cfg.env else cfg.env)
+    env = env.replace(":", "_")  # an engine's env spec ("smax:3m") as a portable file name
     return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 def run_path(cfg: TrainConfig, budget: str) -> Path:
     return runs_dir(budget) / "runs" / f"{run_id(cfg)}.csv"
+
+
+def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
+    """A finished run's rows from the cache, checked against its config: every evaluation row
+    of the run, in order, with its seed and algorithm. A file that is not whole raises
+    ``DamagedFile`` naming it (``run_all`` then trains the run again)."""
+    path = run_path(cfg, budget)
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError:
+        raise
+    except Exception as err:  # not text, not CSV, empty
+        raise DamagedFile(f"run file {path} is damaged ({type(err).__name__}: {err}); {RETRAIN}") from None
+    needed = ["algo", "seed", "iteration", "step", "eval_return", "frac_opt", "eval_success", "git_rev"]
+    if [c for c in needed if c not in df.columns]:
+        raise DamagedFile(f"run file {path} lacks the columns {[c for c in needed if c not in df.columns]}; {RETRAIN}")
+    steps = pd.to_numeric(df["step"], errors="coerce")
+    if len(df) != len(cfg.eval_steps) or steps.isna().any() or list(steps) != cfg.eval_steps:
+        raise DamagedFile(f"run file {path} is not the whole run: its steps are not the {len(cfg.eval_steps)} "
+                          f"evaluation steps of its config ({cfg.eval_steps[0]} to {cfg.eval_steps[-1]}), found "
+                          f"{len(df)} rows; {RETRAIN}")
+    if (df["seed"].astype(str) != str(cfg.seed)).any() or (df["algo"].astype(str) != cfg.algo).any():
+        raise DamagedFile(f"run file {path} holds another run's rows (seed or algo differ); {RETRAIN}")
+    return df
+
+
+RETRAIN = "delete it, or let `python -m oapo_lite reproduce` train the run again"
+
+
+def on_disk(cfg: TrainConfig, budget: str) -> bool:
+    """Whether a run is in the cache and whole; a damaged file is named (and counts as missing)."""
+    try:
+        read_run(cfg, budget)
+    except FileNotFoundError:
+        return False
+    except DamagedFile as err:
+        print(f"warning: {err}", file=sys.stderr)
+        return False
+    return True
 
 
 def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
@@ -363,8 +405,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     # seed by seed, so that an interrupted grid has every curve at a few seeds before any at many;
     # within a seed longest first (steps x agents), so that no long run starts last while the
     # other worker idles
-    missing = sorted((r for r in todo if not run_path(r.cfg, budget).exists()),
-                     key=lambda r: (r.cfg.seed, -_cost(r.cfg)))
+    missing = sorted((r for r in todo if not on_disk(r.cfg, budget)), key=lambda r: (r.cfg.seed, -_cost(r.cfg)))
     checkpoints = runs_dir(budget) / "checkpoints"
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
@@ -387,8 +428,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
 
 
 def missing_runs(figure: str, budget: str) -> list[Run]:
-    """The runs of ``figure`` at ``budget`` that are not on disk yet."""
-    return [r for r in runs_of(figure, budget) if not run_path(r.cfg, budget).exists()]
+    """The runs of ``figure`` at ``budget`` that are not on disk yet (or damaged)."""
+    return [r for r in runs_of(figure, budget) if not on_disk(r.cfg, budget)]
 
 
 def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing: bool = False) -> pd.DataFrame:
@@ -401,11 +442,10 @@ def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing
             raise RuntimeError(f"{len(failed)} run(s) of {figure} failed (reported above)")
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
-        if skip_missing and not run_path(cfg, budget).exists():
+        if skip_missing and not on_disk(cfg, budget):
             missing.append(run_id(cfg))
             continue
-        df = pd.read_csv(run_path(cfg, budget))
-        frames.append(df.assign(label=label, figure=figure))
+        frames.append(read_run(cfg, budget).assign(label=label, figure=figure))
     if not frames:
         return pd.DataFrame()
     df = pd.concat(frames, ignore_index=True)

@@ -49,10 +49,10 @@ def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
             raise RuntimeError(f"{len(failed)} run(s) of the layout study failed (reported above)")
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
-        path = experiments.run_path(cfg, budget)
-        if not path.exists():
-            raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: {path}")
-        frames.append(pd.read_csv(path).assign(layout=name, label=label))
+        if not experiments.run_path(cfg, budget).exists():
+            raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: "
+                                    f"{experiments.run_path(cfg, budget)}")
+        frames.append(experiments.read_run(cfg, budget).assign(layout=name, label=label))
     df = pd.concat(frames, ignore_index=True)
     if layouts is None:
         experiments.write_csv_atomic(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")

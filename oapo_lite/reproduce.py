@@ -6,9 +6,12 @@ resumes where it stopped; notebooks then only read results and draw figures.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
+
+from oapo_lite import cli
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = ROOT / "notebooks"
@@ -96,11 +99,13 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     only read the finished runs); ``inplace`` overwrites the committed copies."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    from oapo_lite.executors import die_with_parent
+
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = notebook_paths()
     timings = {}
-    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_timed_run, path, out_dir / path.name,
                                {"budget": budget} if takes_budget(path) else {}): path for path in paths}
         for i, future in enumerate(as_completed(futures), 1):
@@ -115,16 +120,35 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     return [(path.name, timings[path.name]) for path in paths]
 
 
+def _positive(text: str) -> int:
+    if not text.lstrip("+").isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid; allowed: an integer >= 1")
+    return int(text)
+
+
+def _check_writable(folder: Path) -> None:
+    """Fail at the start, not after the first run, if results cannot be written to ``folder``."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        moved = f" (OAPO_FIGURES={os.environ['OAPO_FIGURES']!r})" if os.environ.get("OAPO_FIGURES") else ""
+        raise ValueError(f"cannot write results to {folder}{moved}: {err.strerror}; "
+                         "point OAPO_FIGURES at a folder you can write") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     from oapo_lite import experiments
 
-    parser = argparse.ArgumentParser(prog="python -m oapo_lite reproduce", description=__doc__)
+    parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
     parser.add_argument("--budget", default="smoke", help=f"one of {sorted(experiments.BUDGETS)}")
     parser.add_argument("--inplace", action="store_true",
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
                         help="CI mode: no progress bars")
-    parser.add_argument("--workers", type=int, default=2,
+    parser.add_argument("--workers", type=_positive, default=2,
                         help="parallel training processes (local executor), then notebooks")
     parser.add_argument("--executor", default="local", choices=["local", "ray"],
                         help="where runs are trained: this machine's processes, or a Ray cluster")
@@ -145,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
             from oapo_lite.executors import check_address
 
             check_address(args.address)
+        _check_writable(experiments.data_dir(args.budget))
     except ValueError as err:
         parser.error(str(err))
 

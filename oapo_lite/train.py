@@ -13,8 +13,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 import os
 import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +35,7 @@ from oapo_lite.envs.pettingzoo_vec import PettingZooVec
 from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
                               update_factor, value_loss, weighted_kl)
 from oapo_lite.nets import Actors, Critic, ValueNorm
+from oapo_lite.store import DamagedFile, Lock, atomic_write
 from oapo_lite.trpo import trpo_step
 
 
@@ -57,6 +60,15 @@ ALGOS = {
     "seps": AlgoSpec("uniform", False, False, False, a2c=True),
 }
 SCHEMES = ("AR", "NR", "RR", "UR")
+START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, (bool, np.bool_))
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
 
 
 @dataclass
@@ -118,30 +130,45 @@ class TrainConfig:
             if not ok:
                 raise ValueError(f"{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}")
 
-        need(self.algo in ALGOS, "algo", str(sorted(ALGOS)))
+        def whole(name: str, low: int = 1):
+            need(_is_int(getattr(self, name)) and getattr(self, name) >= low, name, f"an integer >= {low}")
+
+        def real(name: str, ok: Callable[[float], bool], allowed: str, finite: bool = True):
+            x = getattr(self, name)
+            need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name, allowed)
+
+        need(isinstance(self.algo, str) and self.algo in ALGOS, "algo", str(sorted(ALGOS)))
+        need(self.env_fn is None or callable(self.env_fn), "env_fn", "None or a callable that returns a PettingZoo "
+                                                                       "ParallelEnv")
         if self.env_fn is None:
+            need(isinstance(self.env, str) and self.env.strip() != "", "env",
+                 "a built-in map name, a map text or <engine>:<name>")
             env_registry.check(self.env)  # raises naming the built-in maps or the engine's names
-        self.hidden = tuple(self.hidden)
-        need(len(self.hidden) > 0 and all(int(h) == h and h > 0 for h in self.hidden), "hidden", "positive ints")
-        for name in ("steps", "n_envs", "rollout_len", "ppo_epochs", "n_minibatch", "cg_iters",
-                     "line_search_steps", "eval_every", "eval_episodes", "max_steps", "checkpoint_every"):
-            need(int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 1, name, "an integer >= 1")
-        need(int(self.seed) == self.seed and self.seed >= 0, "seed", "an integer >= 0")
+        need(isinstance(self.hidden, (tuple, list)) and len(self.hidden) > 0
+             and all(_is_int(h) and h > 0 for h in self.hidden), "hidden", "a non-empty sequence of positive integers")
+        self.hidden = tuple(int(h) for h in self.hidden)
+        for name in ("steps", "n_envs", "rollout_len", "ppo_epochs", "n_minibatch", "cg_iters", "line_search_steps",
+                     "eval_every", "eval_episodes", "max_steps", "checkpoint_every", "n_step", "seps_pretrain_steps"):
+            whole(name)
+        whole("seed", 0)
         need(self.steps >= self.n_envs * self.rollout_steps, "steps",
              f">= n_envs * rollout_len = {self.n_envs * self.rollout_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "lam"):
-            need(0.0 <= getattr(self, name) <= 1.0, name, "[0, 1]")
-        for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold"):
-            need(getattr(self, name) > 0, name, "> 0")
-        for name in ("entropy_coef", "cg_damping", "accept_ratio", "sigma"):
-            need(getattr(self, name) >= 0, name, ">= 0")
-        need(0.0 < self.backtrack < 1.0, "backtrack", "(0, 1)")
+            real(name, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]")
+        for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold", "a2c_lr", "a2c_adam_eps",
+                     "a2c_max_grad_norm"):
+            real(name, lambda x: x > 0, "a finite number > 0")
+        for name in ("entropy_coef", "cg_damping", "accept_ratio", "seac_lambda"):
+            real(name, lambda x: x >= 0, "a finite number >= 0")
+        real("sigma", lambda x: x >= 0, "a number >= 0 (inf: no KL gate)", finite=False)
+        real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
         need(self.kl_reduce in ("max", "mean"), "kl_reduce", "['max', 'mean']")
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
         for name in ("shared", "bootstrap_truncation"):
-            need(getattr(self, name) in (None, True, False), name, "None, True or False")
-        need(self.reuse_adapt is None or self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
+            need(getattr(self, name) is None or isinstance(getattr(self, name), (bool, np.bool_)), name,
+                 "None, True or False")
+        need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
              f"None or one of {list(adaptive.ADAPT_RULES)}")
         if self.reuse_adapt is not None:
             # the rule rescales Eq. 9's matrix between separate learners; others have no Eq. 9 to adapt
@@ -151,17 +178,25 @@ class TrainConfig:
             need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
                  f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
+        mask = "None, an (n, n) bool mask or a scheme in " + str(list(SCHEMES))
         if isinstance(self.allowed, str):
-            need(self.allowed in SCHEMES, "allowed", f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
+            need(self.allowed in SCHEMES, "allowed", mask)
         elif self.allowed is not None:
-            self.allowed = np.asarray(self.allowed, dtype=bool)
-        for name in ("n_step", "seps_pretrain_steps"):
-            need(int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 1, name, "an integer >= 1")
-        for name in ("a2c_lr", "a2c_adam_eps", "a2c_max_grad_norm"):
-            need(getattr(self, name) > 0, name, "> 0")
-        need(self.seac_lambda >= 0, "seac_lambda", ">= 0")
-        need(self.seps_clusters is None or (int(self.seps_clusters) == self.seps_clusters and self.seps_clusters >= 1),
+            try:
+                allowed = np.asarray(self.allowed)
+            except ValueError:  # ragged rows
+                allowed = None
+            need(allowed is not None and allowed.ndim == 2 and allowed.shape[0] == allowed.shape[1]
+                 and np.isin(allowed, (0, 1)).all(), "allowed", mask)
+            self.allowed = allowed.astype(bool)
+        need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1),
              "seps_clusters", "None or an integer >= 1")
+        if ALGOS[self.algo].a2c:
+            need(self.shared is None, "shared", f"None with algo {self.algo!r} (SEAC has one network per agent, "
+                                                "SePS chooses its groups)")
+            need(not self.bootstrap_truncation, "bootstrap_truncation",
+                 f"None or False with algo {self.algo!r} (its n-step returns end at a truncation as at a termination, "
+                 "the reference code's default)")
         if self.algo == "seps":
             need(self.n_envs * self.n_step <= self.seps_pretrain_steps < self.steps, "seps_pretrain_steps",
                  f">= n_envs * n_step = {self.n_envs * self.n_step} (one iteration) and < steps = {self.steps}")
@@ -174,6 +209,16 @@ class TrainConfig:
     @property
     def n_iterations(self) -> int:
         return self.steps // (self.n_envs * self.rollout_steps)
+
+    def evaluates(self, iteration: int) -> bool:
+        """Whether the run is evaluated after ``iteration`` iterations (0: before the first)."""
+        return iteration % self.eval_every == 0 or iteration == self.n_iterations
+
+    @property
+    def eval_steps(self) -> list[int]:
+        """The env steps of a finished run's evaluation rows."""
+        batch = self.n_envs * self.rollout_steps
+        return [it * batch for it in range(self.n_iterations + 1) if self.evaluates(it)]
 
     def flat(self) -> dict:
         """The config as CSV-friendly scalars."""
@@ -545,17 +590,25 @@ def _mean_or_nan(x) -> float:
     return float(x[~np.isnan(x)].mean()) if (~np.isnan(x)).any() else math.nan
 
 
-def atomic_write(write: Callable[[str], None], path: Path) -> None:
-    """``write(tmp)`` next to ``path``, then rename: a reader sees the old file or the whole new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    write(str(tmp))
-    os.replace(tmp, path)
+def _write_results(rows: list[dict], out: Path) -> None:
+    atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
 
 
 def load_checkpoint(out_dir: str | Path) -> dict:
-    """The last checkpoint of a run directory (parameters, optimisers, RNG states, metrics)."""
-    return torch.load(Path(out_dir) / "checkpoint.pt", weights_only=False)
+    """The last checkpoint of a run directory (parameters, optimisers, RNG states, metrics);
+    ``store.DamagedFile`` naming it if it cannot be read."""
+    path = Path(out_dir) / "checkpoint.pt"
+    try:
+        ck = torch.load(path, weights_only=False)
+    except FileNotFoundError:
+        raise
+    except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
+        detail = str(err).split(". ")[0][:120] or "no detail"
+        raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {detail}); "
+                          f"{START_AFRESH}") from None
+    if not isinstance(ck, dict) or "config" not in ck:
+        raise DamagedFile(f"checkpoint {path} is not an oapo_lite checkpoint; {START_AFRESH}")
+    return ck
 
 
 def _check_resumable(cfg: TrainConfig, ck: dict) -> None:
@@ -564,27 +617,25 @@ def _check_resumable(cfg: TrainConfig, ck: dict) -> None:
     now, saved = cfg.flat(), ck["config"]
     missing = [k for k in now if k not in saved]
     if missing:
-        raise ValueError(f"checkpoint has no config fields {missing} (written by an older oapo_lite); "
-                         "use another out_dir or resume=False")
+        raise ValueError(f"checkpoint has no config fields {missing} (written by an older oapo_lite); {START_AFRESH}")
     differ = [k for k in now if k != "steps" and str(now[k]) != str(saved[k])]
     if differ:
-        raise ValueError(f"checkpoint was written by a different config (fields {differ}); "
-                         "use another out_dir or resume=False")
+        raise ValueError(f"checkpoint was written by a different config (fields {differ}); {START_AFRESH}")
     stale = [f.name for f in dataclasses.fields(ck["step"]) if not hasattr(ck["step"], f.name)]
     if stale:
         raise ValueError(f"checkpoint's environment step has no fields {stale} (written by an older oapo_lite); "
-                         "use another out_dir or resume=False")
+                         f"{START_AFRESH}")
     if ck["iteration"] > cfg.n_iterations:
         raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
-                         f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}, "
-                         "or use another out_dir or resume=False")
+                         f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}; "
+                         f"or {START_AFRESH}")
 
 
 def _diverged_at(err: Diverged, iteration: int, cfg: TrainConfig, out: Path, owner: list[int],
                  agents: list[str]) -> Diverged:
     """``err`` told with the iteration, the seats of the learner (a net index) and the checkpoint."""
     learner = err.learner
-    if isinstance(learner, int):
+    if _is_int(learner):
         learner = f"{learner} (seats {[agents[k] for k in range(len(owner)) if owner[k] == learner]})"
     path = out / "checkpoint.pt"
     last = (f"the last good checkpoint {path} (iteration {load_checkpoint(out)['iteration']}) is left as it was"
@@ -598,23 +649,32 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
     ``results.csv`` is written with every checkpoint. With ``resume``, continue from
-    ``out_dir/checkpoint.pt`` if present; the result is then
-    identical to an uninterrupted run. ``callback(metrics)`` is called after every iteration.
+    ``out_dir/checkpoint.pt`` if present (and write ``results.csv`` again from it); the result
+    is then identical to an uninterrupted run. ``callback(metrics)`` is called after every iteration.
     ``result.attrs``: ``history`` (per-iteration metrics) and ``timing`` (seconds in env
     stepping, policy forwards during rollouts, learning and evaluation).
     """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OSError(f"cannot create the run folder {out} ({err.strerror}); choose another output folder (--out on the command line)") from None
+    lock = Lock(out / ".lock")  # two processes on one run: the second waits, then resumes where the first ended
+    if not lock.acquire(wait=False):
+        print(f"waiting for another process that is training {out}", file=sys.stderr, flush=True)
+        lock.acquire()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores
     try:
-        return _train(cfg, Path(out_dir), resume, progress, callback)
+        return _train(cfg, out, resume, progress, callback)
     finally:
         torch.set_num_threads(threads)
+        lock.release()
 
 
 def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
-    out.mkdir(parents=True, exist_ok=True)
     spec = ALGOS[cfg.algo]
     shared = spec.shared if cfg.shared is None else cfg.shared
     env = make_env(cfg, cfg.n_envs, seed=cfg.seed)
@@ -665,10 +725,12 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
             # evaluation grid (evaluating draws no shared randomness, so dropping it changes
             # nothing else), and its rows carry the new config
             rows = [{**r, **config_cols} for r in ck["rows"]
-                    if r["iteration"] % cfg.eval_every == 0 or r["iteration"] == cfg.n_iterations]
+                    if cfg.evaluates(r["iteration"])]
+            # a results.csv deleted or damaged after the checkpoint was written comes back from it
+            _write_results(rows, out)
         except KeyError as err:
             raise ValueError(f"checkpoint {out / 'checkpoint.pt'} has no entry {err} (written by an older "
-                             "oapo_lite); use another out_dir or resume=False") from None
+                             f"oapo_lite); {START_AFRESH}") from None
     clock = {"env": 0.0, "policy": 0.0, "learn": 0.0, "eval": 0.0}
     batch_size = cfg.n_envs * cfg.rollout_steps
 
@@ -722,7 +784,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
             if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
                 metrics["agreement"] = json.dumps(np.round(C, 6).tolist())
         history.append({"iteration": it + 1, "step": (it + 1) * batch_size, **metrics, "trpo_kls": trpo_kls})
-        if (it + 1) % cfg.eval_every == 0 or it + 1 == cfg.n_iterations:
+        if cfg.evaluates(it + 1):
             evaluation(it + 1, metrics)
         if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.n_iterations:
             ck = {"config": config_cols, "iteration": it + 1, "actors": actors.state_dict(),
@@ -734,7 +796,7 @@ def _train(cfg, out: Path, resume, progress, callback) -> pd.DataFrame:
                   "history": history, "rows": rows, **({} if learner is None else {"a2c": learner.state_dict()})}
             # results.csv goes with the checkpoint, so the two always agree (and rewriting the
             # growing CSV at every evaluation cost a tenth of a paper-budget run)
-            atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
+            _write_results(rows, out)
             atomic_write(lambda p: torch.save(ck, p), out / "checkpoint.pt")
         if callback is not None:
             callback(history[-1])

@@ -5,15 +5,13 @@ import pytest
 
 from oapo_lite import claims, experiments, verdicts
 
+import fakes
+
 
 def write_runs(figure, budget, plateau):
     """A fake finished run per (label, seed): a ramp to ``plateau[label]`` of the optimum."""
-    steps = np.arange(0, 240_001, 16_000)
     for label, cfg in experiments.figure_runs(figure, budget):
-        path = experiments.run_path(cfg, budget)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        frac = np.minimum(steps / 80_000, 1.0) * plateau[label]
-        pd.DataFrame({"step": steps, "frac_opt": frac, "seed": cfg.seed, "git_rev": "test"}).to_csv(path, index=False)
+        fakes.write_run(cfg, budget, lambda steps: np.minimum(steps / 80_000, 1.0) * plateau[label])
 
 
 def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):

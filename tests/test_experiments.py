@@ -4,6 +4,8 @@ import pytest
 from oapo_lite import experiments
 from oapo_lite.train import TrainConfig
 
+import fakes
+
 
 def test_a_run_id_depends_only_on_fields_that_differ_from_the_defaults():
     bare = TrainConfig(algo="happo", seed=3)
@@ -68,20 +70,23 @@ def test_a_new_figure_is_data_with_its_own_budget_overrides():
 
 
 def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
-    from oapo_lite import reproduce
+    from oapo_lite import executors, reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     (cfg,) = [cfg for _, cfg in experiments.figure_runs("fig1", "smoke")]
-    checkpoint = experiments.data_dir("smoke") / "checkpoints" / experiments.run_id(cfg) / "checkpoint.pt"
-    checkpoint.parent.mkdir(parents=True)
-    checkpoint.write_bytes(b"not a checkpoint")  # the run resumes from it, and raises
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a broken run")
+
+    monkeypatch.setattr(executors, "train", broken)
     argv = ["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]
     assert reproduce.main(argv) == 1
     out = capsys.readouterr()
     assert f"FAILED {experiments.run_id(cfg)} (fig1, curve 'oappo')" in out.out and "0 trained" in out.out
     assert experiments.run_id(cfg) in out.err and "Traceback" in out.err and "'env': 'black_blue_red'" in out.err
     assert not experiments.run_path(cfg, "smoke").exists()
-    checkpoint.unlink()
+    monkeypatch.undo()
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     assert reproduce.main(argv) == 0
     assert experiments.run_path(cfg, "smoke").exists() and "1 trained, 0 already on disk, 0 failed" in capsys.readouterr().out
 
@@ -135,8 +140,7 @@ def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
     runs = experiments.runs_of("fig4_smax", "smoke")
     assert experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True).empty
     cfg = runs[0].cfg
-    fake = pd.DataFrame({"step": [0, 3200], "eval_success": [0.0, 0.5], "seed": 0, "env": cfg.env, "git_rev": "x"})
-    experiments.write_csv_atomic(fake, experiments.run_path(cfg, "smoke"))
+    fakes.write_run(cfg, "smoke", lambda steps: steps / 6400, grid=1, env=cfg.env)
     df = experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True)
-    assert set(df["label"]) == {runs[0].label} and len(df) == 2
+    assert set(df["label"]) == {runs[0].label} and len(df) == len(cfg.eval_steps) == 3
     assert experiments.missing_runs("fig4_smax", "smoke") == runs[1:]

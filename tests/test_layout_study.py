@@ -6,6 +6,8 @@ import pytest
 from oapo_lite import experiments, layout_study
 from oapo_lite.envs.layouts import LAYOUTS
 
+import fakes
+
 
 def test_grid_has_every_curve_on_every_layout_once():
     runs = layout_study.study_runs("paper")
@@ -32,13 +34,10 @@ def test_tables_read_the_runs(tmp_path, monkeypatch):
     # at 48k, lambda = 0.2 stays at 20% of it, every other curve reaches it at 64k
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     name = sorted(LAYOUTS)[0]
-    steps = np.arange(0, 240_001, 16_000)
     reach = {"oappo": 32_000, layout_study.ADAPTIVE: 48_000}
     for _, label, cfg in layout_study.study_runs("paper", [name]):
-        frac = np.minimum(steps / reach.get(label, 64_000), 1.0) * (0.2 if label == "oappo lambda=0.2" else 1.0)
-        path = experiments.run_path(cfg, "paper")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pd.DataFrame({"step": steps, "frac_opt": frac, "seed": cfg.seed}).to_csv(path, index=False)
+        fakes.write_run(cfg, "paper", lambda steps: np.minimum(steps / reach.get(label, 64_000), 1.0)
+                        * (0.2 if label == "oappo lambda=0.2" else 1.0))
     df = layout_study.load("paper", [name], run_missing=False)
     table = layout_study.table(df)
     assert table.loc[(name, "oappo"), "steps_iqm"] == 32_000 and table.loc[(name, "happo"), "steps_iqm"] == 64_000

@@ -290,7 +290,8 @@ def test_the_cli_trains_seac_and_seps_on_a_maze(tmp_path, capsys):
                          "--seps-pretrain-steps", "400", "--seps-clusters", "none", "--out", str(tmp_path),
                          "--no-progress"]) == 0
         assert f"{algo} on black_red, seed 0: 800 env steps" in capsys.readouterr().out
-    rows = __import__("pandas").read_csv(tmp_path / "seps_black_red_s0" / "results.csv")
+    (seps_run,) = tmp_path.glob("seps-black_red-s0-*")
+    rows = __import__("pandas").read_csv(seps_run / "results.csv")
     assert rows["seps_groups"].iloc[-1] == "red | black"  # two agents: no k in 2..n-1, no sharing
 
 

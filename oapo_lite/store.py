@@ -1,0 +1,81 @@
+"""Files that survive a kill: atomic writes, per-run locks, and a clear error for a damaged file.
+
+A writer writes next to the target and renames, so a reader sees the old file or the whole new
+one; the temporary files of writers that were killed are removed by the next write. A lock is
+an ``flock`` on a file: the kernel releases it when its holder dies, however it dies.
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import socket
+from pathlib import Path
+from typing import Callable
+
+_HOST = socket.gethostname().replace("-", "_")
+
+
+class DamagedFile(ValueError):
+    """A result or checkpoint file that cannot be read back; the message names it and what to do."""
+
+
+def _tmp_name(path: Path, pid: int) -> Path:
+    return path.with_name(f".{path.name}.tmp-{_HOST}-{pid}")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def remove_stale_tmp(path: Path) -> None:
+    """Remove the temporary files that killed writers of ``path`` on this host left behind."""
+    prefix = f".{path.name}.tmp"
+    for tmp in path.parent.glob(f"{prefix}*"):
+        rest = tmp.name[len(prefix):]
+        host, _, pid = rest.rpartition("-")
+        if rest.isdigit():  # written before the host was part of the name
+            host, pid = f"-{_HOST}", rest
+        if host == f"-{_HOST}" and pid.isdigit() and not _alive(int(pid)):
+            tmp.unlink(missing_ok=True)
+
+
+def atomic_write(write: Callable[[str], None], path: Path) -> None:
+    """``write(tmp)`` next to ``path``, then rename: a reader sees the old file or the whole new one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_tmp(path)
+    tmp = _tmp_name(path, os.getpid())
+    try:
+        write(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class Lock:
+    """An exclusive lock on ``path`` (created if missing), held until ``release`` or until the
+    holder dies. ``acquire(wait=False)`` returns whether it got the lock."""
+
+    def __init__(self, path: Path):
+        self.path, self._fd = Path(path), None
+
+    def acquire(self, wait: bool = True) -> bool:
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            os.close(fd)
+            return False
+        self._fd = fd
+        return True
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor releases the flock
+            self._fd = None

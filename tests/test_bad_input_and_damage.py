@@ -1,0 +1,319 @@
+"""Bad input and damaged files, as a user meets them: every command-line error is one line with
+exit status 2 and no traceback; no damaged file is loaded or loses a result; killed and
+concurrent writers leave nothing behind and train nothing twice."""
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from oapo_lite import __main__ as cli
+from oapo_lite import experiments, store
+from oapo_lite.executors import train_job
+from oapo_lite.losses import Diverged
+from oapo_lite.train import TrainConfig, _diverged_at, load_checkpoint, train
+
+QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
+SMALL = dict(env="black_red", n_envs=8, rollout_len=25, steps=400, eval_every=1, eval_episodes=4)
+
+
+def _cli_error(capsys, *argv) -> str:
+    """Run the CLI, expect exit status 2 and one line on stderr, no traceback; return the line."""
+    try:
+        code = cli.main(list(argv))
+    except SystemExit as exit_:  # argparse's own errors
+        code = exit_.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    return err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--algo", "seac", "--shared", "true"], ["shared = True", "None with algo 'seac'"]),
+    (["--algo", "seac", "--bootstrap-truncation", "true"], ["bootstrap_truncation = True", "None or False"]),
+    (["--algo", "seps", "--env", "black_blue_red", "--seps-clusters", "5", "--seps-pretrain-steps", "200"],
+     ["seps_clusters = 5", "3 agents", "1..3"]),
+    (["--env", "mamujoco:Hopper-3x1", "--algo", "oappo"], ["needs equal spaces", "allowed"]),
+    (["--env", "mamujoco:Hopper-3x1", "--algo", "mappo"], ["needs equal spaces", "happo"]),
+    (["--lr", "inf"], ["lr = inf", "finite number > 0"]),
+    (["--lr", "1e30"], ["not finite", "learner 0 (seats ['red'])", "no checkpoint had been written"]),
+    (["--sigma", "-1"], ["sigma = -1.0", ">= 0"]),
+    (["--steps", "200.0"], ["--steps", "200.0"]),
+    (["--n-envs", "0"], ["n_envs = 0", "integer >= 1"]),
+    (["--algo", "ppo"], ["ppo", "oappo"]),
+])
+def test_a_bad_training_option_is_one_line_naming_it(tmp_path, capsys, argv, words):
+    err = _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path), *argv)
+    for word in words:
+        assert word in err
+
+
+def test_a_diverging_oatrpo_run_is_one_line(tmp_path, capsys):
+    err = _cli_error(capsys, "train", "--algo", "oatrpo", "--lr", "1e6", "--critic-lr", "1e6", "--n-envs", "8",
+                     "--rollout-len", "25", "--steps", "6000", "--eval-every", "100", "--no-progress",
+                     "--out", str(tmp_path))
+    assert "of oatrpo seed 0" in err and "is not finite" in err
+
+
+@pytest.mark.parametrize("out", ["a_file", "a_file/below", "/proc/no_such/folder"])
+def test_an_output_folder_that_cannot_be_made_is_named(tmp_path, capsys, out):
+    (tmp_path / "a_file").write_text("x")
+    target = out if out.startswith("/") else str(tmp_path / out)
+    err = _cli_error(capsys, "train", *QUICK, "--out", target)
+    assert f"cannot create the run folder {target}/" in err and "another output folder (--out" in err
+
+
+def test_run_folders_carry_the_config_hash_so_settings_never_collide(tmp_path, capsys):
+    for lr in ("5e-4", "1e-3"):
+        assert cli.main(["train", *QUICK, "--lr", lr, "--out", str(tmp_path)]) == 0
+    folders = sorted(p.name for p in tmp_path.iterdir())
+    cfgs = [TrainConfig(algo="oappo", env="black_red", n_envs=8, rollout_len=25, steps=400, eval_episodes=4, lr=lr)
+            for lr in (5e-4, 1e-3)]
+    assert folders == sorted(experiments.run_id(c) for c in cfgs) and len(set(folders)) == 2
+    assert f"run folder: {tmp_path / experiments.run_id(cfgs[0])}" in capsys.readouterr().out
+
+
+def test_resuming_past_the_asked_steps_names_no_resume(tmp_path, capsys):
+    cfg = TrainConfig(algo="happo", **{**SMALL, "steps": 800})
+    train(cfg, tmp_path / "run", progress=False)
+    with pytest.raises(ValueError, match="--no-resume"):
+        train(TrainConfig(algo="happo", **SMALL), tmp_path / "run", progress=False)
+    with pytest.raises(ValueError, match="different config.*--no-resume"):
+        train(TrainConfig(algo="happo", **{**SMALL, "steps": 800, "lr": 1e-3}), tmp_path / "run", progress=False)
+
+
+def test_a_map_file_error_names_the_file(tmp_path, capsys):
+    path = tmp_path / "my_maze.txt"
+    path.write_text("agents: red black\nstart: 1,1 1,1\n#####\n#..*##\n#####\n")
+    assert f"map '{path}' has ragged rows" in _cli_error(capsys, "train", *QUICK, "--env", str(path),
+                                                         "--out", str(tmp_path))
+    path.write_bytes(b"\xff\xfe\x00garbage")
+    assert f"cannot read the map file {path}" in _cli_error(capsys, "train", *QUICK, "--env", str(path),
+                                                            "--out", str(tmp_path))
+
+
+def test_a_bug_says_how_to_see_its_traceback_and_debug_shows_it(tmp_path, capsys, monkeypatch):
+    import oapo_lite.train
+
+    def broken(*args, **kwargs):
+        raise KeyError("a bug")
+
+    monkeypatch.setattr(oapo_lite.train, "train", broken)
+    argv = ["train", *QUICK, "--out", str(tmp_path)]
+    assert cli.main(argv) == 1
+    err = capsys.readouterr().err
+    assert "error: KeyError: 'a bug' (a bug in oapo_lite? rerun with --debug" in err and "Traceback" not in err
+    with pytest.raises(KeyError):
+        cli.main([*argv, "--debug"])
+    monkeypatch.setenv("OAPO_DEBUG", "1")
+    with pytest.raises(KeyError):
+        cli.main(argv)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--workers", "0"], ["--workers", "'0' is invalid", "integer >= 1"]),
+    (["--workers", "-3"], ["'-3' is invalid"]),
+    (["--budget", "huge"], ["unknown budget 'huge'", "smoke"]),
+])
+def test_a_bad_reproduce_option_is_one_line(capsys, argv, words):
+    err = _cli_error(capsys, "reproduce", *argv)
+    for word in words:
+        assert word in err
+
+
+@pytest.mark.parametrize("target", ["a_file", "/proc/no_such"])
+def test_oapo_figures_that_cannot_be_written_is_one_line(tmp_path, capsys, monkeypatch, target):
+    (tmp_path / "a_file").write_text("x")
+    target = target if target.startswith("/") else str(tmp_path / target)
+    monkeypatch.setenv("OAPO_FIGURES", target)
+    err = _cli_error(capsys, "reproduce", "--skip-notebooks")
+    assert f"OAPO_FIGURES='{target}'" in err and "cannot write results" in err
+
+
+@pytest.mark.parametrize("damage", [
+    lambda b: b[:100],  # truncated
+    lambda b: b"",  # empty
+    lambda b: np.random.default_rng(0).bytes(5000),  # random bytes
+])
+def test_a_damaged_checkpoint_is_named_with_what_to_do(tmp_path, capsys, damage):
+    argv = ["train", *QUICK, "--out", str(tmp_path)]
+    assert cli.main(argv) == 0
+    (run,) = tmp_path.iterdir()
+    ck = run / "checkpoint.pt"
+    ck.write_bytes(damage(ck.read_bytes()))
+    err = _cli_error(capsys, *argv)
+    assert f"checkpoint {ck} is damaged" in err and "--no-resume" in err
+    assert cli.main([*argv, "--no-resume"]) == 0  # what the message says works
+    load_checkpoint(run)
+
+
+def test_reproduce_trains_a_run_with_a_damaged_checkpoint_again(tmp_path, capfd):
+    cfg = TrainConfig(algo="oappo", **SMALL)
+    rows, error = train_job(cfg, str(tmp_path / "fresh"))
+    (tmp_path / "damaged").mkdir()
+    (tmp_path / "damaged" / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    again, error_again = train_job(cfg, str(tmp_path / "damaged"))
+    assert error is None and error_again is None
+    pd.testing.assert_frame_equal(rows, again)
+    assert f"checkpoint {tmp_path / 'damaged' / 'checkpoint.pt'} is damaged" in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "delete"])
+def test_a_finished_run_with_a_damaged_results_csv_rewrites_it_from_its_checkpoint(tmp_path, damage):
+    cfg = TrainConfig(algo="happo", **SMALL)
+    train(cfg, tmp_path, progress=False)
+    path = tmp_path / "results.csv"
+    good = path.read_bytes()
+    {"truncate": lambda: path.write_bytes(good[:200]), "garbage": lambda: path.write_bytes(b"\x00\xff" * 50),
+     "delete": path.unlink}[damage]()
+    train(cfg, tmp_path, progress=False)
+    assert path.read_bytes() == good
+
+
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    (cfg,) = [c for _, c in experiments.figure_runs("fig1", "smoke")]
+    assert experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False).done == 1
+    return cfg, experiments.run_path(cfg, "smoke")
+
+
+@pytest.mark.parametrize("damage, words", [
+    (lambda df, p: p.write_bytes(b"\x89PNG\x00\xff" * 40), "damaged"),
+    (lambda df, p: p.write_bytes(b""), "damaged"),
+    (lambda df, p: df.iloc[:1].to_csv(p, index=False), "evaluation steps of its config.*found 1 rows"),
+    (lambda df, p: df.assign(step=df["step"].where(df.index != 1)).to_csv(p, index=False), "evaluation steps"),
+    (lambda df, p: df.drop(columns="eval_return").to_csv(p, index=False), r"lacks the columns \['eval_return'\]"),
+    (lambda df, p: df.assign(seed=7).to_csv(p, index=False), "another run's rows"),
+])
+def test_the_run_cache_is_checked_when_read_and_a_damaged_run_is_trained_again(tmp_path, monkeypatch, capsys,
+                                                                              damage, words):
+    cfg, path = _cache(tmp_path, monkeypatch)
+    good = path.read_bytes()
+    damage(pd.read_csv(path), path)
+    with pytest.raises(store.DamagedFile, match=f"run file {re.escape(str(path))} .*{words}"):
+        experiments.load_figure("fig1", "smoke", run_missing=False)
+    assert experiments.missing_runs("fig1", "smoke")[0].cfg == cfg
+    assert f"warning: run file {path}" in capsys.readouterr().err
+    count = experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False)
+    assert (count.done, count.cached) == (1, 0) and path.read_bytes() == good
+    assert experiments.load_figure("fig1", "smoke", run_missing=False)["step"].is_monotonic_increasing
+
+
+def test_a_second_trainer_of_a_run_waits_and_then_trains_nothing_again(tmp_path, capfd):
+    """Two ``reproduce`` on one cache train a run in the same checkpoint folder: the second
+    waits for the first's lock, then resumes from its finished checkpoint."""
+    cfg = TrainConfig(algo="oappo", **SMALL)
+    first = train(cfg, tmp_path, progress=False)
+    held = store.Lock(tmp_path / ".lock")
+    assert held.acquire(wait=False)
+    iterations, result = [], {}
+    second = threading.Thread(target=lambda: result.update(rows=train(cfg, tmp_path, progress=False,
+                                                                      callback=iterations.append)))
+    second.start()
+    time.sleep(1.0)
+    assert second.is_alive() and "waiting for another process that is training" in capfd.readouterr().err
+    held.release()
+    second.join(30)
+    assert not second.is_alive() and iterations == []
+    pd.testing.assert_frame_equal(first, result["rows"])
+
+
+def test_a_killed_writers_temporary_files_are_removed_by_the_next_write(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)
+    target = tmp_path / "results.csv"
+    stale = [tmp_path / f".results.csv.tmp{pid}", store._tmp_name(target, pid)]
+    alive = store._tmp_name(target, os.getppid())  # a writer still at work keeps its file
+    for path in (*stale, alive):
+        path.write_text("half a file")
+    store.atomic_write(lambda p: open(p, "w").write("whole"), target)
+    assert target.read_text() == "whole" and alive.exists() and not any(p.exists() for p in stale)
+
+
+def test_a_killed_reproduce_driver_takes_its_workers_with_it(tmp_path):
+    env = {**os.environ, "OAPO_FIGURES": str(tmp_path)}
+    driver = subprocess.Popen([sys.executable, "-c", "from oapo_lite import experiments; "
+                               "experiments.run_all('paper', figures=('fig3b',), workers=2, progress=False)"],
+                              env=env, stderr=subprocess.DEVNULL)
+    def children() -> list[int]:
+        return [int(p) for task in os.listdir(f"/proc/{driver.pid}/task")
+                for p in open(f"/proc/{driver.pid}/task/{task}/children").read().split()]
+
+    deadline = time.time() + 120
+    while time.time() < deadline and len(children()) < 3:  # resource tracker + 2 workers
+        time.sleep(0.2)
+    pids = children()
+    assert len(pids) >= 3
+    time.sleep(3)  # the workers are training
+    driver.send_signal(signal.SIGKILL)
+    driver.wait()
+    deadline = time.time() + 15
+    while time.time() < deadline and any(os.path.exists(f"/proc/{p}") and _not_zombie(p) for p in pids):
+        time.sleep(0.2)
+    assert not [p for p in pids if os.path.exists(f"/proc/{p}") and _not_zombie(p)]
+
+
+def _not_zombie(pid: int) -> bool:
+    try:
+        return open(f"/proc/{pid}/stat").read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
+    cfg = TrainConfig(algo="happo", **SMALL)
+    err = _diverged_at(Diverged("the PPO loss (Eq. 8)", np.int64(1)), 3, cfg, tmp_path, [0, 1], ["red", "black"])
+    assert "learner 1 (seats ['black'])" in str(err)
+
+
+@pytest.mark.parametrize("bad, words", [
+    (dict(n_envs=4.0), ["n_envs = 4.0", "an integer >= 1"]),
+    (dict(steps=200.0), ["steps = 200.0", "an integer >= 1"]),
+    (dict(hidden=(64.0,)), ["hidden = (64.0,)", "positive integers"]),
+    (dict(hidden=64), ["hidden = 64", "sequence"]),
+    (dict(steps="abc"), ["steps = 'abc'", "an integer"]),
+    (dict(steps=None), ["steps = None", "an integer"]),
+    (dict(lam=None), ["lam = None", "[0, 1]"]),
+    (dict(sigma="0.1"), ["sigma = '0.1'", ">= 0"]),
+    (dict(lr=float("nan")), ["lr = nan", "finite"]),
+    (dict(seed=True), ["seed = True", "integer >= 0"]),
+    (dict(shared=0), ["shared = 0", "None, True or False"]),
+    (dict(env=None), ["env = None", "map"]),
+    (dict(env=""), ["env = ''", "map"]),
+    (dict(env_fn=5), ["env_fn = 5", "callable"]),
+    (dict(allowed=[[True, False], [True]]), ["allowed", "(n, n) bool mask"]),
+    (dict(allowed=[[1, 0, 1], [0, 1, 1]]), ["allowed", "(n, n) bool mask"]),
+    (dict(reuse_adapt=["gradient"]), ["reuse_adapt", "gradient_test"]),
+])
+def test_a_config_value_of_the_wrong_type_is_named(bad, words):
+    with pytest.raises(ValueError) as err:
+        TrainConfig(**bad)
+    for word in words:
+        assert word in str(err.value)
+
+
+def test_numpy_scalars_are_valid_config_values():
+    cfg = TrainConfig(steps=np.int64(3200), seed=np.int32(1), lam=np.float64(0.5), hidden=(np.int64(32),))
+    assert cfg.hidden == (32,) and cfg.n_iterations == 2
+
+
+def test_the_second_numeric_path_changes_float32_digits():
+    """``make test`` runs nbval again under MKL's compatible code path and ATen's AVX2 kernels
+    (see the Makefile): it is a test of CPU independence only where those change the digits of
+    the float32 work the notebooks do."""
+    code = ("import torch; g = torch.Generator().manual_seed(0); a = torch.randn(256, 163, generator=g); "
+            "w = torch.randn(163, 64, generator=g); print(repr((a @ w).tanh().sum(0).tolist()))")
+    if not torch.backends.mkl.is_available():
+        pytest.skip("torch does not use MKL here: the second path moves only ATen's kernels")
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**os.environ, **extra}).stdout
+            for extra in ({}, {"MKL_CBWR": "COMPATIBLE", "ATEN_CPU_CAPABILITY": "avx2"})]
+    assert runs[0] != runs[1]
