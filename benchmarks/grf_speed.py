@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from oapo_lite.envs import grf
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.train import train
 
 
 def bare(name: str, seconds: float) -> float:

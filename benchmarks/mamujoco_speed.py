@@ -17,7 +17,8 @@ import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
 from oapo_lite.experiments import get_figure
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.train import train
 
 
 def rate(n: int, t: tuple[float, float]) -> str:

@@ -25,7 +25,8 @@ import numpy as np
 
 from oapo_lite import experiments
 from oapo_lite.envs.smax import SmaxVec
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.train import train
 
 
 def config(map_name: str, algo: str, iterations: int) -> TrainConfig:

@@ -12,7 +12,8 @@ import argparse
 import tempfile
 import time
 
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.train import train
 
 
 def measure(algo: str, steps: int) -> dict:

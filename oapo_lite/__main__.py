@@ -34,7 +34,7 @@ def _bool(text: str) -> bool:
 
 
 def train_parser() -> argparse.ArgumentParser:
-    from oapo_lite.train import TrainConfig
+    from oapo_lite.config import TrainConfig
 
     parser = cli.Parser(prog="python -m oapo_lite train", description="Train one run.")
     special = {
@@ -62,8 +62,9 @@ def train_parser() -> argparse.ArgumentParser:
 
 
 def train_main(argv: list[str]) -> int:
+    from oapo_lite.config import TrainConfig
     from oapo_lite.experiments import run_id
-    from oapo_lite.train import TrainConfig, train
+    from oapo_lite.train import train
 
     args = vars(train_parser().parse_args(argv))
     out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from oapo_lite import seps
+from oapo_lite import reuse, seps
 from oapo_lite.losses import check_finite, source_mean
 from oapo_lite.nets import Actors, Critic
 
@@ -156,6 +156,10 @@ class Learner:
         n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
         if self.seps and cfg.seps_clusters is not None and not 1 <= cfg.seps_clusters <= n:
             raise ValueError(f"seps_clusters = {cfg.seps_clusters} is invalid for {n} agents; allowed: None or 1..{n}")
+        reuse.check_spaces(env, np.ones((n, n), bool))  # SEAC learns from every seat, SePS may group any
+        # the draws of the PPO family's critic, which SEAC / SePS do not have: their networks keep
+        # the initialisation their committed runs were trained with
+        Critic(env.state_dim, cfg.hidden, gen)
         self.cfg, self.n_actions = cfg, env.n_actions
         self.a2c = A2C(actors, env.obs_dim, cfg.hidden, cfg.seac_lambda if cfg.algo == "seac" else 0.0, cfg.gamma,
                        cfg.a2c_lr, cfg.a2c_adam_eps, cfg.a2c_max_grad_norm, cfg.entropy_coef, gen)
@@ -168,8 +172,9 @@ class Learner:
     def groups(self) -> str:
         return seps.group_names(self.owner, self.agents)
 
-    def learn(self, batch, step, it: int) -> dict:
-        """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout."""
+    def learn(self, batch, step, it: int) -> tuple[dict, dict]:
+        """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout.
+        Returns (metrics for the results rows, nothing more for the history)."""
         next_obs = torch.from_numpy(step.obs)
         if self.buffer is not None:
             self._record(batch, next_obs)
@@ -178,7 +183,7 @@ class Learner:
             self._regroup()
         returns = batch.episode_returns
         metrics = {"train_return": sum(returns) / len(returns) if returns else float("nan"), **metrics}
-        return {**metrics, "seps_groups": self.groups} if self.seps else metrics
+        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), {}
 
     def _record(self, batch, next_obs: torch.Tensor) -> None:
         """Store (o, a, o', r, id); o' of the last step is the observation after the rollout
@@ -204,10 +209,12 @@ class Learner:
                  {k: round(v, 4) for k, v in self.db_scores.items()})
 
     def state_dict(self) -> dict:
-        return {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
-                "embeddings": self.embeddings, "db_scores": self.db_scores}
+        """This learner's part of the run's checkpoint, under one key."""
+        return {"a2c": {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
+                        "embeddings": self.embeddings, "db_scores": self.db_scores}}
 
-    def load_state_dict(self, state: dict) -> None:
+    def load_state_dict(self, checkpoint: dict) -> None:
+        state = checkpoint["a2c"]
         self.a2c.load_state_dict(state["a2c"])
         self.owner, self.buffer = state["owner"], state["buffer"]
         self.embeddings, self.db_scores = state["embeddings"], state["db_scores"]

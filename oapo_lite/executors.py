@@ -19,7 +19,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from oapo_lite.store import DamagedFile
-from oapo_lite.train import git_revision, train
+from oapo_lite.runstate import git_revision
+from oapo_lite.train import train
 
 PACKAGE = Path(__file__).resolve().parent
 

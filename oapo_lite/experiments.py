@@ -21,7 +21,7 @@ import pandas as pd
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
 from oapo_lite.store import DamagedFile, atomic_write
-from oapo_lite.train import TrainConfig
+from oapo_lite.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -13,7 +13,7 @@ import pandas as pd
 
 from oapo_lite import experiments, verdicts
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
-from oapo_lite.train import TrainConfig
+from oapo_lite.config import TrainConfig
 
 LAMBDAS = experiments.LAMBDAS
 ADAPTIVE = experiments.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting

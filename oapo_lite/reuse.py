@@ -134,3 +134,23 @@ def scheme_mask(scheme: str, agents: tuple[str, ...]) -> np.ndarray:
         for j, b in enumerate(agents):
             mask[i, j] |= (a, b) in pairs[scheme] or (b, a) in pairs[scheme]
     return mask
+
+
+def allowed_mask(allowed, agents: tuple[str, ...]) -> np.ndarray | None:
+    """A config's ``allowed`` (None, a scheme name or an (n, n) bool mask) for these agents."""
+    if isinstance(allowed, str):
+        return scheme_mask(allowed, agents)
+    if allowed is not None and allowed.shape != (len(agents),) * 2:
+        raise ValueError(f"allowed mask has shape {allowed.shape}, expected {(len(agents),) * 2}")
+    return allowed
+
+
+def check_spaces(env, pairs: np.ndarray) -> None:
+    """Reusing experience needs equal observation and action spaces (Section 4). ``pairs[i, j]``:
+    learner i may train on agent j's experience (not necessarily symmetric)."""
+    spaces = getattr(env, "spaces", None)
+    for i, j in zip(*np.nonzero(pairs)):
+        if spaces is not None and i != j and spaces[i] != spaces[j]:
+            raise ValueError(
+                f"reuse between agents {env.agents[i]!r} and {env.agents[j]!r} needs equal spaces, got "
+                f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")

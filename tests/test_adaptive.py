@@ -8,7 +8,10 @@ import torch
 
 from oapo_lite import adaptive, reuse
 from oapo_lite.losses import off_agent_objective
-from oapo_lite.train import (Sources, TrainConfig, collect, learner_dists, make_env, source_gradients, train)
+from oapo_lite.config import TrainConfig
+from oapo_lite.rollout import collect, make_env
+from oapo_lite.train import train
+from oapo_lite.update import Sources, learner_dists, source_gradients
 from oapo_lite.nets import Actors
 
 torch.set_num_threads(1)

@@ -18,7 +18,9 @@ from oapo_lite import __main__ as cli
 from oapo_lite import experiments, store
 from oapo_lite.executors import train_job
 from oapo_lite.losses import Diverged
-from oapo_lite.train import TrainConfig, _diverged_at, load_checkpoint, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.runstate import RunState, load_checkpoint
+from oapo_lite.train import _diverged_at, train
 
 QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
 SMALL = dict(env="black_red", n_envs=8, rollout_len=25, steps=400, eval_every=1, eval_episodes=4)
@@ -269,9 +271,9 @@ def _not_zombie(pid: int) -> bool:
 
 
 def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
-    cfg = TrainConfig(algo="happo", **SMALL)
-    err = _diverged_at(Diverged("the PPO loss (Eq. 8)", np.int64(1)), 3, cfg, tmp_path, [0, 1], ["red", "black"])
-    assert "learner 1 (seats ['black'])" in str(err)
+    state = RunState.start(TrainConfig(algo="happo", **SMALL))
+    err = _diverged_at(Diverged("the PPO loss (Eq. 8)", np.int64(1)), state, tmp_path)
+    assert "learner 1 (seats ['black'])" in str(err) and "iteration 1 of happo" in str(err)
 
 
 @pytest.mark.parametrize("bad, words", [

@@ -1,6 +1,5 @@
 """The cross-budget claim table reads only budgets whose runs are all on disk."""
 import numpy as np
-import pandas as pd
 import pytest
 
 from oapo_lite import claims, experiments, verdicts

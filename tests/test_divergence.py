@@ -9,8 +9,12 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from oapo_lite.nets import Actors
-from oapo_lite.train import (ALGOS, Diverged, Inputs, Rollout, TrainConfig, load_checkpoint, policy_distances, train,
-                             update_actors)
+from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.losses import Diverged
+from oapo_lite.rollout import Inputs, Rollout
+from oapo_lite.runstate import load_checkpoint
+from oapo_lite.train import train
+from oapo_lite.update import policy_distances, update_actors
 
 torch.set_num_threads(1)
 

@@ -2,7 +2,7 @@
 import pytest
 
 from oapo_lite import experiments
-from oapo_lite.train import TrainConfig
+from oapo_lite.config import TrainConfig
 
 import fakes
 
@@ -134,8 +134,6 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
 
 
 def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
-    import pandas as pd
-
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     runs = experiments.runs_of("fig4_smax", "smoke")
     assert experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True).empty

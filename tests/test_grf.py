@@ -11,7 +11,8 @@ import pytest
 from oapo_lite import experiments
 from oapo_lite.__main__ import main
 from oapo_lite.envs import grf
-from oapo_lite.train import TrainConfig, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.train import train
 
 SCENARIO = "academy_3_vs_1_with_keeper"
 needs_grf = pytest.mark.skipif(not grf.installed() and not os.environ.get("CI"),

@@ -1,6 +1,5 @@
 """The layout study's grid: every curve on every layout, cached like the figures' runs."""
 import numpy as np
-import pandas as pd
 import pytest
 
 from oapo_lite import experiments, layout_study

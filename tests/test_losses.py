@@ -9,7 +9,8 @@ import torch
 from oapo_lite import reuse
 from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
 from oapo_lite.nets import Actors, Categorical, Gaussian, ValueNorm
-from oapo_lite.train import TrainConfig, advantages
+from oapo_lite.config import TrainConfig
+from oapo_lite.update import advantages
 
 torch.set_num_threads(1)
 

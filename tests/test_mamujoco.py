@@ -6,7 +6,10 @@ import torch
 
 from oapo_lite.envs import mamujoco, registry
 from oapo_lite.nets import Actors
-from oapo_lite.train import TrainConfig, collect, load_checkpoint, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.rollout import collect
+from oapo_lite.runstate import load_checkpoint
+from oapo_lite.train import train
 
 CHEETAH = "mamujoco:HalfCheetah-2x3"
 TINY = dict(env=CHEETAH, n_envs=2, rollout_len=20, max_steps=30, eval_every=1, eval_episodes=2)

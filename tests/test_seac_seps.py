@@ -13,7 +13,10 @@ from oapo_lite import seps
 from oapo_lite.a2c import A2C, nstep_returns, seac_loss
 from oapo_lite.envs import make_vec
 from oapo_lite.nets import Actors
-from oapo_lite.train import TrainConfig, collect, load_checkpoint, train
+from oapo_lite.config import TrainConfig
+from oapo_lite.rollout import collect
+from oapo_lite.runstate import load_checkpoint
+from oapo_lite.train import train
 
 torch.set_num_threads(1)
 

@@ -12,7 +12,9 @@ pytest.importorskip("jaxmarl")
 from oapo_lite.envs import registry  # noqa: E402
 from oapo_lite.envs.smax import NOOP, SmaxVec, check  # noqa: E402
 from oapo_lite.nets import Actors  # noqa: E402
-from oapo_lite.train import TrainConfig, sample_actions, train  # noqa: E402
+from oapo_lite.config import TrainConfig  # noqa: E402
+from oapo_lite.rollout import sample_actions  # noqa: E402
+from oapo_lite.train import train  # noqa: E402
 
 N, MAX_STEPS = 16, 40
 UNIT_FEATURES = 10  # SMAX's world state: 10 features per unit (health first), then teams and types

@@ -15,8 +15,12 @@ from oapo_lite import __main__ as cli
 from oapo_lite.envs import MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
 from oapo_lite.nets import Actors, Categorical
-from oapo_lite.train import (ALGOS, Inputs, Rollout, Sources, TrainConfig, check_reuse_spaces, collect, learner_dists,
-                             load_checkpoint, policy_distances, train, update_actors)
+from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.reuse import check_spaces
+from oapo_lite.rollout import Inputs, Rollout, collect
+from oapo_lite.runstate import load_checkpoint
+from oapo_lite.train import train
+from oapo_lite.update import Sources, learner_dists, policy_distances, update_actors
 
 torch.set_num_threads(1)
 
@@ -166,7 +170,7 @@ def test_oappo_with_one_shared_network_and_uniform_reuse_is_bitwise_mappo(tmp_pa
 
 def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, monkeypatch):
     """Algorithm 1 line 5: in "sample" mode W is one-hot per learner, on a source M allows."""
-    import oapo_lite.train as train_module
+    import oapo_lite.update as train_module
 
     seen = []
     real = train_module.update_actors
@@ -417,8 +421,8 @@ def test_reuse_in_one_direction_between_different_spaces_raises():
     env = PettingZooVec(lambda: Toy(obs_dims=(3, 5)), n_envs=1)
     for one_way in ([[1, 0], [1, 1]], [[1, 1], [0, 1]]):  # b learns from a; a learns from b
         with pytest.raises(ValueError, match="needs equal spaces"):
-            check_reuse_spaces(env, np.array(one_way, bool))
-    check_reuse_spaces(env, np.eye(2, dtype=bool))  # own experience only
+            check_spaces(env, np.array(one_way, bool))
+    check_spaces(env, np.eye(2, dtype=bool))  # own experience only
 
 
 def test_an_agent_that_leaves_early_is_inactive_until_the_episode_resets():

@@ -8,6 +8,7 @@ copies reset at once (auto-reset); nothing is random.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,6 +66,9 @@ class VecMaze:
         self.agents = self.maze.agents
         self.n_agents = self.maze.n_agents
         self.n_actions = N_ACTIONS
+        self.continuous = False
+        # the state holds t / max_steps, so the time limit is part of the game and its end terminal
+        self.time_in_state = True
         self.obs_dim = self.maze.obs_table.shape[1]
         self.state_dim = self.n_agents * self.maze.n_cells + 1
         self._seat = np.arange(self.n_agents)
@@ -83,6 +87,13 @@ class VecMaze:
         # next_cell[seat, cell, action] flattened: one np.take instead of a 3-array fancy index
         self._next_flat, self._seat_base = self.maze.next_cell.ravel(), self._seat * self.maze.n_cells * N_ACTIONS
         self._reset_all()
+
+    @functools.cached_property
+    def optimum(self) -> float:
+        """The best team return (the search oracle's), which evaluations are measured against."""
+        from .oracle import optimal_return  # the oracle reads this module's rules
+
+        return optimal_return(self.maze)
 
     def _reset_all(self) -> None:
         self.cells = np.tile(self._starts, (self.n_envs, 1))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
+import math
 import multiprocessing as mp
 import os
 import warnings
@@ -174,6 +175,7 @@ class GRFVec:
         self.agents = tuple(f"player_{k}" for k in range(self.n_agents))
         self.n_actions, self.obs_dim, self.state_dim = N_ACTIONS, OBS_DIM, self.n_agents * OBS_DIM
         self.continuous = False
+        self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle
         workers = min(self.n_envs, workers or os.cpu_count() or 1)
         self._parts = np.array_split(np.arange(self.n_envs), workers)
         ctx = mp.get_context("spawn")  # the engine and torch do not fork safely

@@ -10,6 +10,7 @@ Agents that have left ``env.agents`` before the episode ends are marked inactive
 from __future__ import annotations
 
 import copy
+import math
 from typing import Callable
 
 import numpy as np
@@ -54,6 +55,7 @@ class PettingZooVec:
         first = self.envs[0]
         self.agents = tuple(first.possible_agents)
         self.n_agents = len(self.agents)
+        self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle
         self.spaces = tuple((first.observation_space(a), first.action_space(a)) for a in self.agents)
         acts = [act for _, act in self.spaces]
         kinds = {type(a) for a in acts}

@@ -19,6 +19,7 @@ lets later processes on the same machine load them instead.
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -166,6 +167,7 @@ class SmaxVec:
         self.obs_dim = env.obs_size
         self.state_dim = env.state_size
         self.continuous = False
+        self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle
         self._reset, self._step = self._c.for_batch(self.n_envs)
         self._carry = None
 

@@ -1,0 +1,213 @@
+"""A run's configuration: the algorithm table and ``TrainConfig``, checked when it is made."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from oapo_lite import adaptive
+from oapo_lite.envs import registry as env_registry
+
+
+@dataclass(frozen=True)
+class AlgoSpec:
+    reuse: str | None  # "oapo": Eq. 9; "own": M = I; "uniform": M = 1/n; None: the A2C learner's own rule
+    sequential: bool  # random update order and the factor rho
+    trust_region: bool  # Eq. 7 (TRPO step) instead of Eq. 8 (PPO clip)
+    shared: bool  # one network for every seat
+    a2c: bool = False  # SEAC / SePS: their A2C learner (oapo_lite/a2c.py) replaces the update below
+
+
+ALGOS = {
+    "oappo": AlgoSpec("oapo", True, False, False),
+    "oatrpo": AlgoSpec("oapo", True, True, False),
+    "happo": AlgoSpec("own", True, False, False),
+    "hatrpo": AlgoSpec("own", True, True, False),
+    "mappo": AlgoSpec("uniform", False, False, True),
+    "ippo": AlgoSpec("own", False, False, False),
+    # their own learner (a2c.py) decides who learns from whom
+    "seac": AlgoSpec(None, False, False, False, a2c=True),
+    "seps": AlgoSpec(None, False, False, False, a2c=True),
+}
+SCHEMES = ("AR", "NR", "RR", "UR")
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, (bool, np.bool_))
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
+@dataclass
+class TrainConfig:
+    """Everything that determines a run (with the seed). Defaults follow HARL (ANCHORS.md),
+    except the smaller (64, 64) hidden layers and the batch shape (32 copies x 50 steps)."""
+
+    algo: str = "oappo"
+    env: str = "black_red"  # built-in map name or map text
+    env_fn: Callable | None = None  # PettingZoo ParallelEnv factory; replaces ``env`` when given
+    seed: int = 0
+    steps: int = 200_000  # total env steps (joint transitions over all copies)
+    n_envs: int = 32
+    rollout_len: int = 50
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    # V(final state) on truncation; None: yes, except on the built-in mazes, whose state holds
+    # t / max_steps, so the time limit is part of the MDP and its end is terminal
+    bootstrap_truncation: bool | None = None
+    lr: float = 5e-4
+    critic_lr: float = 5e-4
+    ppo_epochs: int = 5
+    n_minibatch: int = 1
+    clip: float = 0.2
+    entropy_coef: float = 0.01
+    max_grad_norm: float = 10.0
+    hidden: tuple[int, ...] = (64, 64)
+    sigma: float = 0.1  # Eq. 9's KL threshold
+    lam: float = 0.7  # Eq. 9's own-experience probability
+    kl_reduce: str = "max"
+    reuse_mode: str = "weights"
+    allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
+    shared: bool | None = None  # one network for all seats; None: the algorithm's own choice
+    # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
+    # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
+    reuse_adapt: str | None = None
+    kl_threshold: float = 0.01  # TRPO delta
+    cg_iters: int = 10
+    cg_damping: float = 0.1
+    line_search_steps: int = 10
+    backtrack: float = 0.8
+    accept_ratio: float = 0.5
+    eval_every: int = 5  # iterations
+    eval_episodes: int = 32
+    max_steps: int = 50
+    checkpoint_every: int = 25  # iterations
+    # SEAC and SePS train with A2C at their papers' defaults (ANCHORS.md); the PPO / TRPO fields
+    # above (rollout_len, lr, critic_lr, ppo_epochs, clip, max_grad_norm, ...) do not apply to them
+    n_step: int = 5  # their n-step returns, and so their rollout length
+    a2c_lr: float = 3e-4
+    a2c_adam_eps: float = 1e-3
+    a2c_max_grad_norm: float = 0.5
+    seac_lambda: float = 1.0  # weight of the other agents' importance-weighted terms
+    seps_clusters: int | None = None  # None: the best Davies-Bouldin index over 2..n-1
+    seps_pretrain_steps: int = 20_000  # env steps on one shared network before clustering; part of ``steps``
+
+    def __post_init__(self):
+        def need(ok: bool, name: str, allowed: str):
+            if not ok:
+                raise ValueError(f"{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}")
+
+        def whole(name: str, low: int = 1):
+            need(_is_int(getattr(self, name)) and getattr(self, name) >= low, name, f"an integer >= {low}")
+
+        def real(name: str, ok: Callable[[float], bool], allowed: str, finite: bool = True):
+            x = getattr(self, name)
+            need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name, allowed)
+
+        need(isinstance(self.algo, str) and self.algo in ALGOS, "algo", str(sorted(ALGOS)))
+        need(self.env_fn is None or callable(self.env_fn), "env_fn", "None or a callable that returns a PettingZoo "
+                                                                       "ParallelEnv")
+        if self.env_fn is None:
+            need(isinstance(self.env, str) and self.env.strip() != "", "env",
+                 "a built-in map name, a map text or <engine>:<name>")
+            env_registry.check(self.env)  # raises naming the built-in maps or the engine's names
+        need(isinstance(self.hidden, (tuple, list)) and len(self.hidden) > 0
+             and all(_is_int(h) and h > 0 for h in self.hidden), "hidden", "a non-empty sequence of positive integers")
+        self.hidden = tuple(int(h) for h in self.hidden)
+        for name in ("steps", "n_envs", "rollout_len", "ppo_epochs", "n_minibatch", "cg_iters", "line_search_steps",
+                     "eval_every", "eval_episodes", "max_steps", "checkpoint_every", "n_step", "seps_pretrain_steps"):
+            whole(name)
+        whole("seed", 0)
+        need(self.steps >= self.n_envs * self.rollout_steps, "steps",
+             f">= n_envs * rollout_len = {self.n_envs * self.rollout_steps} (one iteration)")
+        need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
+        for name in ("gamma", "gae_lambda", "lam"):
+            real(name, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]")
+        for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold", "a2c_lr", "a2c_adam_eps",
+                     "a2c_max_grad_norm"):
+            real(name, lambda x: x > 0, "a finite number > 0")
+        for name in ("entropy_coef", "cg_damping", "accept_ratio", "seac_lambda"):
+            real(name, lambda x: x >= 0, "a finite number >= 0")
+        real("sigma", lambda x: x >= 0, "a number >= 0 (inf: no KL gate)", finite=False)
+        real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
+        need(self.kl_reduce in ("max", "mean"), "kl_reduce", "['max', 'mean']")
+        need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
+        for name in ("shared", "bootstrap_truncation"):
+            need(getattr(self, name) is None or isinstance(getattr(self, name), (bool, np.bool_)), name,
+                 "None, True or False")
+        need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
+             f"None or one of {list(adaptive.ADAPT_RULES)}")
+        if self.reuse_adapt is not None:
+            # the rule rescales Eq. 9's matrix between separate learners; others have no Eq. 9 to adapt
+            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
+            need(ALGOS[self.algo].reuse == "oapo", "reuse_adapt",
+                 f"None with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
+            need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
+            need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
+                 f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
+        mask = "None, an (n, n) bool mask or a scheme in " + str(list(SCHEMES))
+        if isinstance(self.allowed, str):
+            need(self.allowed in SCHEMES, "allowed", mask)
+        elif self.allowed is not None:
+            try:
+                allowed = np.asarray(self.allowed)
+            except ValueError:  # ragged rows
+                allowed = None
+            need(allowed is not None and allowed.ndim == 2 and allowed.shape[0] == allowed.shape[1]
+                 and np.isin(allowed, (0, 1)).all(), "allowed", mask)
+            self.allowed = allowed.astype(bool)
+        need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1),
+             "seps_clusters", "None or an integer >= 1")
+        if ALGOS[self.algo].a2c:
+            need(self.shared is None, "shared", f"None with algo {self.algo!r} (SEAC has one network per agent, "
+                                                "SePS chooses its groups)")
+            need(not self.bootstrap_truncation, "bootstrap_truncation",
+                 f"None or False with algo {self.algo!r} (its n-step returns end at a truncation as at a termination, "
+                 "the reference code's default)")
+        if self.algo == "seps":
+            need(self.n_envs * self.n_step <= self.seps_pretrain_steps < self.steps, "seps_pretrain_steps",
+                 f">= n_envs * n_step = {self.n_envs * self.n_step} (one iteration) and < steps = {self.steps}")
+
+    @property
+    def rollout_steps(self) -> int:
+        """Steps of every env copy per iteration: ``n_step`` for SEAC / SePS, else ``rollout_len``."""
+        return self.n_step if ALGOS[self.algo].a2c else self.rollout_len
+
+    @property
+    def shared_network(self) -> bool:
+        """One network for every seat: the algorithm's choice unless ``shared`` says otherwise."""
+        return ALGOS[self.algo].shared if self.shared is None else self.shared
+
+    @property
+    def n_iterations(self) -> int:
+        return self.steps // (self.n_envs * self.rollout_steps)
+
+    def evaluates(self, iteration: int) -> bool:
+        """Whether the run is evaluated after ``iteration`` iterations (0: before the first)."""
+        return iteration % self.eval_every == 0 or iteration == self.n_iterations
+
+    @property
+    def eval_steps(self) -> list[int]:
+        """The env steps of a finished run's evaluation rows."""
+        batch = self.n_envs * self.rollout_steps
+        return [it * batch for it in range(self.n_iterations + 1) if self.evaluates(it)]
+
+    def flat(self) -> dict:
+        """The config as CSV-friendly scalars."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["hidden"] = "-".join(map(str, self.hidden))
+        d["allowed"] = self.allowed if self.allowed is None or isinstance(self.allowed, str) \
+            else json.dumps(np.asarray(self.allowed).astype(int).tolist())
+        if self.env_fn is not None:
+            d["env"] = d["env_fn"] = getattr(self.env_fn, "__name__", type(self.env_fn).__name__)
+        elif "\n" in self.env:
+            d["env"] = self.env.strip().replace("\n", "/")  # a map text, on one CSV line
+        return d
+

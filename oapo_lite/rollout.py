@@ -1,0 +1,129 @@
+"""Rollouts: every seat's policy acting in a vector of env copies, for training (``collect``) and
+for evaluation (``evaluate``), and the batch they produce (``Rollout``)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from oapo_lite.config import TrainConfig
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.pettingzoo_vec import PettingZooVec
+from oapo_lite.nets import Actors
+
+
+def make_env(cfg: TrainConfig, n_envs: int, seed: int):
+    if cfg.env_fn is not None:
+        return PettingZooVec(cfg.env_fn, n_envs, seed=seed, max_steps=cfg.max_steps)
+    return env_registry.make_vec(cfg.env, n_envs, seed, cfg.max_steps)
+
+
+
+def _per_agent(x: np.ndarray, seat_axis: int) -> np.ndarray:
+    """(T, N, n, ...) or (T, n, N, ...) rollout array -> (n, T * N, ...): sample b = t * N + env."""
+    x = np.moveaxis(x, seat_axis, 0)
+    return x.reshape(x.shape[0], -1, *x.shape[3:])
+
+
+@dataclass
+class Inputs:
+    """The batch's actor inputs with every distinct (observation, mask) stored once; sample b
+    of seat j reads row ``index[j, b]``. Maze observations repeat a lot, so forwards get cheap."""
+
+    obs: torch.Tensor  # (U, obs_dim)
+    avail: torch.Tensor  # (U, A)
+    index: torch.Tensor  # (n, B)
+
+    @classmethod
+    def of(cls, obs: np.ndarray, avail: np.ndarray) -> "Inputs":
+        n, B = obs.shape[:2]
+        obs, avail = obs.reshape(n * B, -1), avail.reshape(n * B, -1)
+        raw = np.ascontiguousarray(np.concatenate([obs.view(np.uint8), avail.view(np.uint8)], 1))
+        keys = raw.view(np.dtype((np.void, raw.shape[1]))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        return cls(torch.from_numpy(obs[first]), torch.from_numpy(avail[first]),
+                   torch.from_numpy(inverse.reshape(n, B)))
+
+
+@dataclass
+class Rollout:
+    inputs: Inputs
+    act: torch.Tensor  # (n, B) or (n, B, D)
+    logp: torch.Tensor  # (n, B) behaviour log-probabilities
+    state: torch.Tensor  # (T + 1, N, state_dim)
+    final_state: torch.Tensor  # (T, N, state_dim)
+    reward: torch.Tensor  # (T, N)
+    terminated: torch.Tensor  # (T, N)
+    truncated: torch.Tensor  # (T, N)
+    # (n, B) bool: the seat acted on the sample; None when every seat always did (the mazes),
+    # so the losses take the plain means there
+    active: torch.Tensor | None = None
+    episode_returns: list = field(default_factory=list)
+
+
+def sample_actions(actors: Actors, weights, step, gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every seat's action from one batched forward: (actions (n, N, ...), log-probs (n, N))."""
+    obs, avail = (torch.from_numpy(x).transpose(0, 1) for x in (step.obs, step.avail))
+    d = actors.apply(weights, obs, avail)
+    a = actors.head.sample(d, gen)
+    return a, actors.head.log_prob(d, a)
+
+
+def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch.Generator, clock: dict):
+    """Run every seat's actor in one batched forward per step for ``length`` steps."""
+    N, n, continuous = env.n_envs, env.n_agents, actors.head.continuous
+    obs = np.empty((length, N, n, env.obs_dim), np.float32)
+    avail = np.empty((length, N, n, env.n_actions), bool)
+    state = np.empty((length + 1, N, env.state_dim), np.float32)
+    final_state = np.empty((length, N, env.state_dim), np.float32)
+    reward = np.empty((length, N), np.float32)
+    term, trunc = np.empty((length, N), bool), np.empty((length, N), bool)
+    active = np.empty((length, N, n), bool)
+    act = (torch.empty((length, n, N, env.n_actions)) if continuous
+           else torch.empty((length, n, N), dtype=torch.long))
+    logp = torch.empty((length, n, N))
+    returns = []
+    with torch.inference_mode():
+        weights = actors.stack(owner)
+    for t in range(length):
+        obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
+        tic = time.perf_counter()
+        with torch.inference_mode():
+            act[t], logp[t] = sample_actions(actors, weights, step, gen)
+        toc = time.perf_counter()
+        step = env.step(act[t].transpose(0, 1).numpy())
+        clock["policy"] += toc - tic
+        clock["env"] += time.perf_counter() - toc
+        reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
+        returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
+    state[length] = step.state
+    batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
+                    *(torch.from_numpy(_per_agent(x.numpy(), 1)) for x in (act, logp)),
+                    *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
+                    None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns)
+    return batch, step
+
+
+
+def evaluate(actors: Actors, owner: list[int], env, gen: torch.Generator, max_steps: int) -> tuple[float, float]:
+    """Mean return and success rate of the first episode of every copy, stochastic policies."""
+    step = env.reset()
+    ret, success = np.full(env.n_envs, np.nan), np.full(env.n_envs, np.nan)
+    with torch.inference_mode():
+        weights = actors.stack(owner)
+        for _ in range(max_steps):
+            step = env.step(sample_actions(actors, weights, step, gen)[0].transpose(0, 1).numpy())
+            first = np.isnan(ret) & ~np.isnan(step.episode_return)
+            ret[first], success[first] = step.episode_return[first], step.episode_success[first]
+            if not np.isnan(ret).any():
+                break
+    return mean_or_nan(ret), mean_or_nan(success)
+
+
+def mean_or_nan(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(x[~np.isnan(x)].mean()) if (~np.isnan(x)).any() else math.nan
+

@@ -1,0 +1,148 @@
+"""A run's state between iterations, and the files that keep it: ``RunState`` holds everything
+that carries over (env, actors, learner, generators, history, evaluation rows); its
+``state_dict`` *is* the checkpoint, so what is saved and what is resumed cannot drift apart."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from oapo_lite.a2c import Learner as A2CLearner
+from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.nets import Actors
+from oapo_lite.rollout import make_env
+from oapo_lite.store import DamagedFile, atomic_write
+from oapo_lite.update import Learner
+
+START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
+
+
+def derive_seed(*keys: int) -> int:
+    """A seed for one purpose of a run (evaluation episodes, action sampling, ...), from its seed."""
+    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0])
+
+
+def git_revision() -> str:
+    """HEAD of the checkout the code runs from; ``OAPO_GIT_REV`` when set (a Ray worker runs a
+    copy of the package shipped by the driver, outside any checkout, and is given the driver's)."""
+    if os.environ.get("OAPO_GIT_REV"):
+        return os.environ["OAPO_GIT_REV"]
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
+                             text=True, timeout=10)
+        return out.stdout.strip() if out.returncode == 0 else "unknown"
+    except OSError:
+        return "unknown"
+
+
+
+
+@dataclass
+class RunState:
+    """Everything a run carries from one iteration to the next. ``start`` builds it from a config
+    (always in the same order: a run is reproducible from its seed); ``learner`` is the PPO / TRPO
+    family's (``update.Learner``) or SEAC / SePS's (``a2c.Learner``)."""
+
+    cfg: TrainConfig
+    env: object
+    eval_env: object
+    actors: Actors
+    learner: Learner | A2CLearner
+    act_gen: torch.Generator  # the actions of the rollouts
+    step: object  # the envs' last step: where the next rollout starts
+    iteration: int = 0
+    history: list = field(default_factory=list)  # per-iteration metrics
+    rows: list = field(default_factory=list)  # the evaluation rows: results.csv
+
+    @classmethod
+    def start(cls, cfg: TrainConfig) -> "RunState":
+        env = make_env(cfg, cfg.n_envs, seed=cfg.seed)
+        eval_env = make_env(cfg, cfg.eval_episodes, seed=derive_seed(cfg.seed, 2))
+        torch.manual_seed(cfg.seed)
+        init_gen = torch.Generator().manual_seed(cfg.seed)
+        actors = Actors(1 if cfg.shared_network else env.n_agents, env.obs_dim, env.n_actions, cfg.hidden,
+                        env.continuous, init_gen)
+        learner = (A2CLearner if ALGOS[cfg.algo].a2c else Learner)(cfg, env, actors, init_gen)
+        act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))
+        return cls(cfg, env, eval_env, actors, learner, act_gen, env.reset())
+
+    @property
+    def owner(self) -> list[int]:
+        """The net of every seat (SePS regroups its seats once its pre-training ends)."""
+        return self.learner.owner
+
+    def state_dict(self) -> dict:
+        return {"config": self.cfg.flat(), "iteration": self.iteration, "actors": self.actors.state_dict(),
+                **self.learner.state_dict(), "act_gen": self.act_gen.get_state(), "torch_rng": torch.get_rng_state(),
+                "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows}
+
+    def load_state_dict(self, ck: dict) -> None:
+        """Continue from checkpoint ``ck`` (``check_resumable`` first). A run extended to more
+        steps has no row where the shorter budget ended off the evaluation grid (evaluating draws
+        no shared randomness, so dropping it changes nothing else), and its rows carry the new config."""
+        check_resumable(self.cfg, ck)
+        try:
+            self.actors.load_state_dict(ck["actors"])
+            self.learner.load_state_dict(ck)
+            self.act_gen.set_state(ck["act_gen"])
+            torch.set_rng_state(ck["torch_rng"])
+            self.env.set_state(ck["env"])
+            self.iteration, self.step, self.history = ck["iteration"], ck["step"], ck["history"]
+        except KeyError as err:
+            raise ValueError(f"checkpoint has no entry {err} (written by an older oapo_lite); {START_AFRESH}") from None
+        config = self.cfg.flat()
+        self.rows = [{**r, **config} for r in ck["rows"] if self.cfg.evaluates(r["iteration"])]
+
+    def save(self, out: Path) -> None:
+        """``results.csv`` and ``checkpoint.pt``, each written atomically."""
+        save_results(self.rows, out)
+        state = self.state_dict()
+        atomic_write(lambda p: torch.save(state, p), out / "checkpoint.pt")
+
+
+def save_results(rows: list[dict], out: Path) -> None:
+    atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
+
+
+def load_checkpoint(out_dir: str | Path) -> dict:
+    """The last checkpoint of a run directory (parameters, optimisers, RNG states, metrics);
+    ``store.DamagedFile`` naming it if it cannot be read."""
+    path = Path(out_dir) / "checkpoint.pt"
+    try:
+        ck = torch.load(path, weights_only=False)
+    except FileNotFoundError:
+        raise
+    except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
+        detail = str(err).split(". ")[0][:120] or "no detail"
+        raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {detail}); "
+                          f"{START_AFRESH}") from None
+    if not isinstance(ck, dict) or "config" not in ck:
+        raise DamagedFile(f"checkpoint {path} is not an oapo_lite checkpoint; {START_AFRESH}")
+    return ck
+
+
+def check_resumable(cfg: TrainConfig, ck: dict) -> None:
+    """A checkpoint can continue ``cfg`` if it has every current field and only ``steps``
+    differs, and grows."""
+    now, saved = cfg.flat(), ck["config"]
+    missing = [k for k in now if k not in saved]
+    if missing:
+        raise ValueError(f"checkpoint has no config fields {missing} (written by an older oapo_lite); {START_AFRESH}")
+    differ = [k for k in now if k != "steps" and str(now[k]) != str(saved[k])]
+    if differ:
+        raise ValueError(f"checkpoint was written by a different config (fields {differ}); {START_AFRESH}")
+    stale = [f.name for f in dataclasses.fields(ck["step"]) if not hasattr(ck["step"], f.name)]
+    if stale:
+        raise ValueError(f"checkpoint's environment step has no fields {stale} (written by an older oapo_lite); "
+                         f"{START_AFRESH}")
+    if ck["iteration"] > cfg.n_iterations:
+        raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
+                         f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}; "
+                         f"or {START_AFRESH}")
+

@@ -1,0 +1,299 @@
+"""The PPO / TRPO family's update of one iteration (Algorithm 1 lines 4-9, then the critic):
+the joint advantage, the policy distances K and Eq. 9's reuse weights, the learners updated one
+after another on their sources' samples (Eq. 8, or Eq. 7's trust-region step) with the
+sequential factor, and the centralised critic. ``Learner`` holds what only this family needs
+(critic, value normaliser, optimisers, the update-order generator) and is what the loop drives."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from oapo_lite import adaptive, reuse
+from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
+from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
+                              update_factor, value_loss, weighted_kl)
+from oapo_lite.nets import Actors, Critic, ValueNorm
+from oapo_lite.rollout import Inputs, Rollout, mean_or_nan
+from oapo_lite.trpo import trpo_step
+
+
+@dataclass
+class Sources:
+    """What one learner (net) trains on: the seats ``rows`` — its sources with W > 0 and the
+    seats it controls (``own``, positions in ``rows``, for the entropy and the factor)."""
+
+    net: int
+    rows: list[int]
+    own: list[int]
+    w: torch.Tensor  # (R,) reuse weights W[net, rows]
+    act: torch.Tensor  # (R, B)
+    logp_old: torch.Tensor  # (R, B) behaviour log-probs pi_j_old(a_j | o_j)
+    kl_w: torch.Tensor  # (R,) trust-region weights (Eq. 7's W[net, rows], own seats never 0)
+    active: torch.Tensor | None = None  # (R, B) the source acted on the sample; None: always
+    # the distinct input rows of all the sources' samples, and each sample's position among
+    # them (R, B): every full-batch forward of the learner needs them, so they are found once
+    distinct: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    @classmethod
+    def of(cls, net: int, W: np.ndarray, owner: list[int], batch: Rollout) -> "Sources":
+        own = [k for k in range(len(owner)) if owner[k] == net]
+        rows = sorted(set(np.flatnonzero(W[net] > 0).tolist()) | set(own))
+        w = W[net][rows]
+        # Eq. 7 weights the KL by M, which bounds the acting policy's own-seat KL by
+        # delta / W[i, i]: nothing when W[i, i] = 0 ("sample" mode drew another source, or
+        # lam = 0), and then the policy that acts could move without limit. An own seat with
+        # weight 0 therefore enters the trust region with weight 1 (its KL <= delta); where the
+        # paper's weight is positive it is kept, so the weights mode is Eq. 7 as written.
+        kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
+        return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(w, dtype=torch.float32),
+                   batch.act[rows], batch.logp[rows], torch.as_tensor(kl_w, dtype=torch.float32),
+                   None if batch.active is None else batch.active[rows],
+                   torch.unique(batch.inputs.index[rows], return_inverse=True))
+
+
+def learner_dists(actors: Actors, inputs: Inputs, src: Sources, idx=slice(None)) -> torch.Tensor:
+    """(R, b, P): the learner's distribution on its sources' samples ``idx``, one forward
+    over the distinct inputs they use."""
+    if src.distinct is not None and idx == slice(None):
+        used, inverse = src.distinct
+    else:
+        used, inverse = torch.unique(inputs.index[src.rows][:, idx], return_inverse=True)
+    return actors(inputs.obs[used].unsqueeze(0), [src.net], inputs.avail[used].unsqueeze(0))[0][inverse]
+
+
+def _minibatches(size: int, k: int, rng: np.random.Generator) -> list:
+    return [slice(None)] if k == 1 else [torch.from_numpy(i) for i in np.array_split(rng.permutation(size), k)]
+
+
+def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: Sources, factor: torch.Tensor,
+               adv: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
+    """OAPPO (Eq. 8): epochs of Adam on the clipped off-agent surrogate plus the entropy of
+    the learner's own seats. Returns the last surrogate value."""
+    params = actors.net_params(src.net)
+    for _ in range(cfg.ppo_epochs):
+        for idx in _minibatches(adv.shape[0], cfg.n_minibatch, rng):
+            d = learner_dists(actors, inputs, src, idx)
+            active = None if src.active is None else src.active[:, idx]
+            obj = off_agent_objective(actors.head.log_prob(d, src.act[:, idx]), src.logp_old[:, idx], src.w,
+                                      factor[idx], adv[idx], cfg.clip, active)
+            own_active = None if active is None else active[src.own].reshape(-1)
+            entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
+            loss = -(obj + cfg.entropy_coef * entropy)
+            check_finite(loss, "the PPO loss (Eq. 8)", src.net)
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+            opt.step()
+    return obj.item()
+
+
+def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor, adv: torch.Tensor,
+                cfg: TrainConfig) -> tuple[float, float]:
+    """OATRPO (Eq. 7): one trust-region step on the unclipped off-agent surrogate under the
+    weighted KL(pi_old || pi) on the sources' observations (weights ``src.kl_w``).
+    Returns (surrogate, KL or NaN)."""
+    head = actors.head
+    with torch.no_grad():
+        d_old = learner_dists(actors, inputs, src)
+        check_finite(off_agent_objective(head.log_prob(d_old, src.act), src.logp_old, src.w, factor, adv, None,
+                                         src.active), "the TRPO surrogate (Eq. 7)", src.net)
+
+    def objective() -> torch.Tensor:
+        d = learner_dists(actors, inputs, src)
+        return off_agent_objective(head.log_prob(d, src.act), src.logp_old, src.w, factor, adv, None, src.active)
+
+    def kl() -> torch.Tensor:
+        return weighted_kl(head.kl(d_old, learner_dists(actors, inputs, src)), src.kl_w, src.active)
+
+    accepted = trpo_step(actors.net_params(src.net), objective, kl, cfg.kl_threshold, cfg.cg_iters, cfg.cg_damping,
+                         cfg.line_search_steps, cfg.backtrack, cfg.accept_ratio)
+    with torch.no_grad():
+        return objective().item(), accepted
+
+
+def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: TrainConfig, bootstrap: bool):
+    """Algorithm 1 line 4: the joint advantage by GAE on de-normalised V(s); a truncated
+    episode is continued by V(final state) if ``bootstrap``, else it ends like a terminated
+    one. Returns (normalised advantage (B,), returns (B,), the critic's normalised
+    predictions (B,) for the clipped value loss)."""
+    with torch.no_grad():
+        v_norm = critic(batch.state)
+        value = value_norm.denormalize(v_norm)
+        final_value = value_norm.denormalize(critic(batch.final_state))
+    cut = batch.terminated | batch.truncated
+    next_value = torch.where(batch.truncated & ~batch.terminated & bootstrap, final_value,
+                             torch.where(cut, 0.0, value[1:]))
+    adv = gae(batch.reward, value[:-1], next_value, cut, cfg.gamma, cfg.gae_lambda)
+    check_finite(adv, "the joint advantage (GAE)", "all: it is joint")
+    return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
+
+
+def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str,
+                     active: torch.Tensor | None = None) -> np.ndarray:
+    """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations (those where j acted, if
+    ``active`` (n, B) is given): every net on every input in one batched forward, then
+    gathered to (learner seat, source seat, sample)."""
+    k, (U, _) = actors.n_nets, inputs.obs.shape
+    with torch.no_grad():
+        d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))[owner][:, inputs.index]
+    if active is None:
+        return _finite_distances(actors.head.kl_matrix(d, reduce))
+    # where source j did not act, every learner is given j's own distribution: KL exactly 0
+    # there, which leaves a max unchanged; a mean is rescaled to the active samples below
+    seat, B = torch.arange(active.shape[0]), active.shape[1]
+    d = torch.where(active[None, :, :, None], d, d[seat, seat][None])
+    K = actors.head.kl_matrix(d, reduce)
+    return _finite_distances(K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy())
+
+
+def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarray, adv: torch.Tensor,
+                     clip: float | None, folds: int = 1) -> np.ndarray:
+    """(n, n, folds, P): row i, column j is the gradient, in learner i's parameters as they are
+    now, of its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on
+    source j's samples alone, with the factor rho = 1 (nobody has moved yet); with ``folds`` > 1,
+    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. Sources
+    that M[i] gives no weight get zeros (the adaptive rule only rescales what Eq. 9 allows).
+    Separate nets only."""
+    n, n_envs = M.shape[0], batch.reward.shape[1]
+    if not 1 <= folds <= n_envs:
+        raise ValueError(f"folds = {folds!r} must lie in [1, n_envs = {n_envs}]")
+    size = sum(p.numel() for p in actors.net_params(0))
+    grads = np.zeros((n, n, folds, size))
+    ones = torch.ones(1)
+    # sample b is step b // n_envs of env copy b % n_envs (``_per_agent``)
+    fold_of = torch.arange(adv.shape[0]) % n_envs % folds
+    for i in range(n):
+        src = Sources.of(i, M, list(range(n)), batch)
+        params = actors.net_params(i)
+        logp = actors.head.log_prob(learner_dists(actors, inputs, src), src.act)
+        for r, j in enumerate(src.rows):
+            for f in range(folds):
+                active = None if src.active is None else src.active[r:r + 1]
+                if folds > 1:  # one fold alone; with one fold the plain mean, bit for bit
+                    active = (fold_of == f)[None] if active is None else active & (fold_of == f)[None]
+                obj = off_agent_objective(logp[r:r + 1], src.logp_old[r:r + 1], ones, torch.ones_like(adv), adv,
+                                          clip, active)
+                last = r + 1 == len(src.rows) and f + 1 == folds
+                g = torch.autograd.grad(obj, params, retain_graph=not last)
+                grads[i, j, f] = torch.cat([x.reshape(-1) for x in g]).double().numpy()
+    check_finite(grads, "a source gradient of the adaptive reuse rule", "all")
+    return grads
+
+
+def _finite_distances(K: np.ndarray) -> np.ndarray:
+    bad = np.argwhere(~np.isfinite(K))
+    if len(bad):
+        raise Diverged(f"the policy distance KL K[{bad[0][0]}, {bad[0][1]}] (Eq. 9)", bad[0][0])
+    return K
+
+
+def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
+                  adv: torch.Tensor, spec: AlgoSpec, cfg: TrainConfig, rng: np.random.Generator):
+    """Algorithm 1 lines 7-9: update the learners one after another in ``order``, learner i on
+    its sources with weights W[i]; for sequential algorithms the factor rho collects the own-seat
+    ratio of every learner already updated. Returns (final factor, surrogates, accepted KLs)."""
+    factor = torch.ones(adv.shape[0])
+    objectives, trpo_kls = [], []
+    for net in order:
+        src = Sources.of(net, W, owner, batch)
+        if spec.trust_region:
+            objective, accepted_kl = trpo_update(actors, batch.inputs, src, factor, adv, cfg)
+            trpo_kls.append(accepted_kl)
+        else:
+            objective = ppo_update(actors, opts[net], batch.inputs, src, factor, adv, cfg, rng)
+        objectives.append(objective)
+        if spec.sequential:
+            with torch.no_grad():
+                d_new = learner_dists(actors, batch.inputs, src)[src.own]
+                factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
+                                       None if src.active is None else src.active[src.own])
+            check_finite(factor, "the sequential factor rho", net)
+    return factor, objectives, trpo_kls
+
+
+def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueNorm, state: torch.Tensor,
+                  v_old: torch.Tensor, returns: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
+    """The critic, trained after the actors (HARL) on normalised targets. Returns the last loss."""
+    value_norm.update(returns)
+    target, state = value_norm.normalize(returns), state.reshape(returns.shape[0], -1)
+    for _ in range(cfg.ppo_epochs):
+        for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
+            loss = value_loss(critic(state[idx]), v_old[idx], target[idx], cfg.clip)
+            check_finite(loss, "the value loss", "critic")
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.max_grad_norm)
+            opt.step()
+    return loss.item()
+
+
+
+class Learner:
+    """What the loop drives for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO: ``learn`` is one
+    iteration's update (Algorithm 1 lines 4-9, then the critic); ``owner[k]`` is the net of seat k.
+    Built right after the actors from the same generator (the critic's initialisation follows
+    theirs), so that a run is reproducible from its seed."""
+
+    def __init__(self, cfg: TrainConfig, env, actors: Actors, gen: torch.Generator):
+        self.cfg, self.spec, self.actors, self.shared = cfg, ALGOS[cfg.algo], actors, cfg.shared_network
+        n = env.n_agents
+        self.owner = [0] * n if self.shared else list(range(n))
+        self.allowed = reuse.allowed_mask(cfg.allowed, env.agents)
+        if self.spec.reuse == "uniform" or self.shared:
+            reuse.check_spaces(env, np.ones((n, n), bool))
+        elif self.spec.reuse == "oapo":
+            reuse.check_spaces(env, np.ones((n, n), bool) if self.allowed is None else self.allowed)
+        # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
+        self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
+        self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm()
+        # one optimiser per net: Adam would move a net that got no gradient through its momentum;
+        # trust-region algorithms step by hand. foreach: the same per-tensor kernels, looped in C++
+        self.actor_opts = [] if self.spec.trust_region else [
+            torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5, foreach=True) for k in range(actors.n_nets)]
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5, foreach=True)
+        self.rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
+
+    def learn(self, batch: Rollout, step, it: int) -> tuple[dict, dict]:
+        """Iteration ``it``'s update on ``batch``: (metrics for the results rows, per-iteration
+        detail for the history: the KL of every accepted trust-region step)."""
+        cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
+        adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
+        K = policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
+        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, self.allowed)
+        if cfg.reuse_adapt is not None:
+            G = source_gradients(actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip,
+                                 adaptive.folds(cfg.reuse_adapt))
+            C = adaptive.agreement(G, cfg.reuse_adapt)
+            M = adaptive.agreement_matrix(M, C, cfg.reuse_adapt)
+        W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, self.rng)]
+        W = W.mean(0, keepdims=True) if self.shared else W  # a shared net learns for every seat
+        order = reuse.update_order(actors.n_nets, self.rng) if spec.sequential else range(actors.n_nets)
+        _, objectives, trpo_kls = update_actors(actors, self.actor_opts, batch, W, self.owner, order, adv, spec, cfg,
+                                                self.rng)
+        critic_loss = update_critic(self.critic, self.critic_opt, self.value_norm, batch.state[:-1], v_old, returns,
+                                    cfg, self.rng)
+        accepted = [k for k in trpo_kls if not math.isnan(k)]
+        metrics = {
+            "train_return": mean_or_nan(batch.episode_returns),
+            "objective": float(np.mean(objectives)), "value_loss": critic_loss,
+            "trpo_kl": mean_or_nan(accepted), "trpo_accepted": len(accepted),
+            "kl_matrix": json.dumps(np.round(K, 6).tolist()), "reuse_matrix": json.dumps(np.round(M, 6).tolist()),
+        }
+        if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
+            metrics["agreement"] = json.dumps(np.round(C, 6).tolist())
+        return metrics, {"trpo_kls": trpo_kls}
+
+    def state_dict(self) -> dict:
+        return {"critic": self.critic.state_dict(), "value_norm": self.value_norm.state_dict(),
+                "critic_opt": self.critic_opt.state_dict(), "np_rng": self.rng.bit_generator.state,
+                **{f"actor_opt{k}": opt.state_dict() for k, opt in enumerate(self.actor_opts)}}
+
+    def load_state_dict(self, state: dict) -> None:
+        for obj, key in ((self.critic, "critic"), (self.value_norm, "value_norm"), (self.critic_opt, "critic_opt"),
+                         *((opt, f"actor_opt{k}") for k, opt in enumerate(self.actor_opts))):
+            obj.load_state_dict(state[key])
+        self.rng.bit_generator.state = state["np_rng"]
