@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.experiments import get_figure
+from oapo_lite.grid import get_figure
 from oapo_lite.config import TrainConfig
 from oapo_lite.train import train
 

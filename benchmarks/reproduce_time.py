@@ -1,6 +1,6 @@
 """Wall time of the whole maze reproduction at a budget (default: paper), from nothing.
 
-Runs `python -m oapo_lite reproduce` on the maze figures (`experiments.MAZE_FIGURES`; the
+Runs `python -m oapo_lite reproduce` on the maze figures (`grid.MAZE_FIGURES`; the
 real engines' paper runs are a cluster's work) with every result written to a fresh
 temporary folder (OAPO_FIGURES), so nothing is cached and the committed figures are not
 touched. Prints the reproduction's own summary, the total wall time and the CPU time of all
@@ -19,7 +19,7 @@ import sys
 import tempfile
 import time
 
-from oapo_lite.experiments import MAZE_FIGURES
+from oapo_lite.grid import MAZE_FIGURES
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")

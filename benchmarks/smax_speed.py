@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from oapo_lite import experiments
+from oapo_lite import grid
 from oapo_lite.envs.smax import SmaxVec
 from oapo_lite.config import TrainConfig
 from oapo_lite.train import train
@@ -31,7 +31,7 @@ from oapo_lite.train import train
 
 def config(map_name: str, algo: str, iterations: int) -> TrainConfig:
     """The figure's settings for ``algo`` on ``map_name`` (every map has runs at ``paper``)."""
-    cfg = next(r.cfg for r in experiments.runs_of("fig4_smax", "paper")
+    cfg = next(r.cfg for r in grid.runs_of("fig4_smax", "paper")
                if r.cfg.env == f"smax:{map_name}" and r.label == algo)
     return dataclasses.replace(cfg, steps=iterations * cfg.n_envs * cfg.rollout_steps)
 
@@ -91,18 +91,18 @@ def speed(map_name: str, algos: list[str], iterations: int) -> None:
               f"{iterations} iterations:\n{profile(config(map_name, algo, iterations))}")
 
 
-def grid(iterations: int) -> None:
+def project_grid(iterations: int) -> None:
     """Project the cpu budget's CPU hours from each map's measured CPU seconds per step (a
     short run evaluates twice, more often than a full one: the projection errs high)."""
     total = 0.0
     print(f"{'map':<24} {'algo':<7} {'CPU s/1k':>9} {'runs':>5} {'steps':>9} {'CPU h':>6}")
-    fig = experiments.get_figure("fig4_smax")
+    fig = grid.get_figure("fig4_smax")
     for env in fig.envs("cpu"):
         map_name, b = env.removeprefix("smax:"), fig.budget("cpu", env)
         seeds, steps = len(b.seeds), b.steps
         base = config(map_name, "oappo", iterations)
         SmaxVec(map_name, base.n_envs, 0, base.max_steps)  # compile outside the measurement
-        for algo in experiments.SMAX_ALGOS:
+        for algo in grid.SMAX_ALGOS:
             cpu = loop(config(map_name, algo, iterations))["cpu_per_kstep"]
             hours = cpu * steps / 1000 * seeds / 3600
             total += hours
@@ -112,13 +112,13 @@ def grid(iterations: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--map", default="3m", help=f"one of {list(experiments.SMAX_MAPS)}")
-    parser.add_argument("--algos", nargs="+", default=list(experiments.SMAX_ALGOS))
+    parser.add_argument("--map", default="3m", help=f"one of {list(grid.SMAX_MAP_SETTINGS)}")
+    parser.add_argument("--algos", nargs="+", default=list(grid.SMAX_ALGOS))
     parser.add_argument("--iterations", type=int, default=6)
     parser.add_argument("--grid", action="store_true", help="project the cpu budget's CPU hours instead")
     args = parser.parse_args()
     if args.grid:
-        grid(max(2, args.iterations // 2))
+        project_grid(max(2, args.iterations // 2))
     else:
         speed(args.map, args.algos, args.iterations)
 

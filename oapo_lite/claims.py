@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import pandas as pd
 
-from oapo_lite import experiments, verdicts
+from oapo_lite import experiments, grid, verdicts
 
 SEED_BUDGETS = ("paper", "paper20")  # 5 and 20 seeds per curve, otherwise identical
 
 
 def on_disk(figure: str, budget: str) -> bool:
     """Every run of ``figure`` at ``budget`` has finished and been written."""
-    return all(experiments.on_disk(cfg, budget) for _, cfg in experiments.figure_runs(figure, budget))
+    return all(experiments.on_disk(cfg, budget) for _, cfg in grid.figure_runs(figure, budget))
 
 
 def table(figures: tuple[str, ...], budgets: tuple[str, ...] = SEED_BUDGETS) -> pd.DataFrame:
@@ -22,7 +22,7 @@ def table(figures: tuple[str, ...], budgets: tuple[str, ...] = SEED_BUDGETS) -> 
     by_budget = {}
     for budget in budgets:
         if all(on_disk(f, budget) for f in figures):
-            name = f"{budget} ({len(experiments.get_budget(budget).seeds)} seeds)"
+            name = f"{budget} ({len(grid.get_budget(budget).seeds)} seeds)"
             by_budget[name] = [v for f in figures
                                for v in verdicts.claims(f, experiments.load_figure(f, budget, run_missing=False))]
     if not by_budget:

@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from oapo_lite import adaptive
+from oapo_lite.reuse import SCHEMES
 from oapo_lite.envs import registry as env_registry
 
 
@@ -34,7 +35,6 @@ ALGOS = {
     "seac": AlgoSpec(None, False, False, False, a2c=True),
     "seps": AlgoSpec(None, False, False, False, a2c=True),
 }
-SCHEMES = ("AR", "NR", "RR", "UR")
 
 
 def _is_int(x) -> bool:

@@ -11,32 +11,32 @@ from __future__ import annotations
 
 import pandas as pd
 
-from oapo_lite import experiments, verdicts
+from oapo_lite import experiments, grid, verdicts
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
 from oapo_lite.config import TrainConfig
 
-LAMBDAS = experiments.LAMBDAS
-ADAPTIVE = experiments.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
+LAMBDAS = grid.LAMBDAS
+ADAPTIVE = grid.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
 # curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
 CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
     f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam} | {
-    ADAPTIVE: dict(experiments.ADAPTIVE_CURVES[0][1])}
+    ADAPTIVE: dict(grid.ADAPTIVE_CURVES[0][1])}
 
 
-def figures(layouts=None) -> list[experiments.Figure]:
-    """One grid entry per layout (not in ``experiments.GRID``: the study is run on request)."""
+def figures(layouts=None) -> list[grid.Figure]:
+    """One grid entry per layout (not in ``grid.GRID``: the study is run on request)."""
     layouts = sorted(LAYOUTS) if layouts is None else list(layouts)
     unknown = sorted(set(layouts) - set(LAYOUTS))
     if unknown:
         raise ValueError(f"unknown layouts {unknown}; the study's layouts are {sorted(LAYOUTS)}")
-    return [experiments.Figure(f"layout_{name}", tuple(CURVES.items()), common=dict(env=f"layout:{name}"))
+    return [grid.Figure(f"layout_{name}", tuple(CURVES.items()), common=dict(env=f"layout:{name}"))
             for name in layouts]
 
 
 def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
     """(layout, curve label, config) for every run of the study at ``budget``."""
     return [(fig.common["env"].removeprefix("layout:"), label, cfg)
-            for fig in figures(layouts) for label, cfg in experiments.figure_runs(fig, budget)]
+            for fig in figures(layouts) for label, cfg in grid.figure_runs(fig, budget)]
 
 
 def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from oapo_lite import cli
+from oapo_lite import cli, grid
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = ROOT / "notebooks"
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     from oapo_lite import experiments
 
     parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
-    parser.add_argument("--budget", default="smoke", help=f"one of {sorted(experiments.BUDGETS)}")
+    parser.add_argument("--budget", default="smoke", help=f"one of {sorted(grid.BUDGETS)}")
     parser.add_argument("--inplace", action="store_true",
                         help="write executed notebooks over notebooks/*.ipynb (to commit them)")
     parser.add_argument("--check", action="store_true",
@@ -155,14 +155,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--address", default=None,
                         help="Ray cluster: auto (the one running on this machine) or HOST:PORT of its head; "
                              "default: start a private one on this machine")
-    parser.add_argument("--figures", nargs="+", default=list(experiments.FIGURES), metavar="FIGURE",
-                        help=f"train only these figures' runs; one or more of {list(experiments.FIGURES)}")
+    parser.add_argument("--figures", nargs="+", default=list(grid.FIGURES), metavar="FIGURE",
+                        help=f"train only these figures' runs; one or more of {list(grid.FIGURES)}")
     parser.add_argument("--skip-notebooks", action="store_true", help="train the runs only")
     args = parser.parse_args(argv)
     try:  # fail fast, naming what is allowed
-        experiments.get_budget(args.budget)
+        grid.get_budget(args.budget)
         for figure in args.figures:
-            experiments.get_figure(figure)
+            grid.get_figure(figure)
         if args.address is not None and args.executor != "ray":
             raise ValueError(f"--address {args.address!r} needs --executor ray")
         if args.executor == "ray":

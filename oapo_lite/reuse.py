@@ -114,6 +114,9 @@ def update_order(n: int, rng: np.random.Generator) -> np.ndarray:
     return rng.permutation(_check_n(n))
 
 
+SCHEMES = ("NR", "UR", "RR", "AR")  # Fig. 5b's reuse schemes, in the paper's order
+
+
 def scheme_mask(scheme: str, agents: tuple[str, ...]) -> np.ndarray:
     """Allowed-pair masks of Fig. 5b on Black-Blue-Red, by agent type.
 
@@ -124,7 +127,7 @@ def scheme_mask(scheme: str, agents: tuple[str, ...]) -> np.ndarray:
     if scheme == "AR":
         return np.ones((len(agents), len(agents)), dtype=bool)
     if scheme not in pairs:
-        raise ValueError(f"unknown reuse scheme {scheme!r}; choose from ['AR', 'NR', 'RR', 'UR']")
+        raise ValueError(f"unknown reuse scheme {scheme!r}; choose from {list(SCHEMES)}")
     missing = {t for pair in pairs[scheme] for t in pair} - set(agents)
     if missing:
         raise ValueError(f"scheme {scheme!r} pairs agent types {sorted(missing)}, "

@@ -24,13 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oapo_lite import reuse
+from oapo_lite import config, reuse
 from oapo_lite.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, log_softmax, softmax, state_distribution
 
-# each algorithm's kind of reuse matrix (reuse.matrix_for)
-REUSE = {"oappo": "oapo", "oatrpo": "oapo", "happo": "own", "hatrpo": "own", "mappo": "uniform"}
-ALGOS = tuple(REUSE)
-TRUST_REGION = ("oatrpo", "hatrpo")
+# the algorithms of the tabular track: the neural track's PPO / TRPO family (``config.ALGOS``,
+# which says each one's reuse matrix and update) but IPPO
+ALGOS = ("oappo", "oatrpo", "happo", "hatrpo", "mappo")
 
 
 @dataclass(frozen=True)
@@ -244,7 +243,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
     rng_init, rng_order, rng_map, rng_samples = (np.random.default_rng(s) for s in streams)
     logits = rng_init.normal(0.0, cfg.init_scale, (1 if shared else n, game.n_obs, game.n_actions))
     seat_learner = np.zeros(n, dtype=np.int64) if shared else np.arange(n)
-    update = trpo_update if cfg.algo in TRUST_REGION else ppo_update
+    update = trpo_update if config.ALGOS[cfg.algo].trust_region else ppo_update
     records = []
     for k in range(cfg.iterations):
         old = softmax(logits)[seat_learner]
@@ -255,7 +254,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
         std = np.sqrt(batch.weight @ (batch.adv - mean) ** 2 / batch.weight.sum())
         adv = (batch.adv - mean) / (std + 1e-8)
         kl = kl_between_agents(old, eta)
-        m = reuse.matrix_for(REUSE[cfg.algo], kl, cfg.sigma, cfg.lam)
+        m = reuse.matrix_for(config.ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.lam)
         mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse == "sample" else None
         rows = np.eye(n)[mapping] if mapping is not None else m
         order = np.zeros(1, dtype=np.int64) if shared else reuse.update_order(n, rng_order)

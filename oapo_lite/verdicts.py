@@ -71,7 +71,6 @@ WIN_RATE = Metric("eval_success", 0.5, 0.05, "a {:.0%} win rate", "final win rat
 RETURN = Metric("eval_return", np.inf, -np.inf, "return {:g}", "final evaluation return")
 # GRF's score: the share of evaluation episodes with a goal; "nearly perfect" is 90%
 SCORE = Metric("eval_success", 0.9, 0.05, "a {:.0%} score", "final score (share of episodes with a goal)")
-FIGURE_METRICS = {"fig4_smax": WIN_RATE, "figA_mamujoco": RETURN, "fig6b": SCORE}  # the others: FRAC_OPT
 
 
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
@@ -330,72 +329,6 @@ def _fmt_final(ev: Evidence, label) -> str:
     return f"{label} {ev.level(label, 'final').fmt()} (mean {ev.summary.loc[label, 'final_mean']:.3f})"
 
 
-# The claims of Section 6.1, as data: (test, the curves it compares, the paper's claim).
-CLAIMS = {
-    "fig3b": [
-        (stuck, ("mappo",), "MAPPO (shared parameters) stays below the optimum"),
-        (faster, ("oappo", "happo"), "OAPPO converges faster than HAPPO"),
-        (faster, ("oatrpo", "happo"), "OATRPO converges faster than HAPPO"),
-        (higher, ("oappo", "mappo"), "OAPPO ends above MAPPO"),
-        (higher, ("oatrpo", "mappo"), "OATRPO ends above MAPPO"),
-        (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO"),
-    ],
-    "fig3c": [
-        (better, (0.1, 0.01), "sigma = 0.1 beats sigma = 0.01 (own experience only is slower)"),
-        (better, (0.1, 1.0), "sigma = 0.1 beats sigma = 1 (irrelevant experience confuses)"),
-        (better, (0.1, 10.0), "sigma = 0.1 beats sigma = 10 (all peers' experience hinders)"),
-    ],
-    "fig3d": [
-        (better, (0.7, 0.4), "lambda = 0.7 is marginally better than lambda = 0.4"),
-        (better, (0.4, 1.0), "lambda = 0.4 beats lambda = 1 (own experience only)"),
-        (better, (0.4, 0.2), "lambda = 0.4 beats lambda = 0.2 (mostly others' experience)"),
-    ],
-    "fig5b": [
-        (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
-        (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
-        (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
-        (optimal, ("NR",), "NR (no reuse) reaches the optimum"),
-    ],
-}
-
-
-# Section 6.2 (Fig. 4) on SMAX, per map: (map, test, curves, claim). The paper's heterogeneous
-# maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is heterogeneous too and small
-# enough to learn on a CPU. "Everywhere" is every map of the figure.
-SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
-SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
-SMAX_CLAIMS = sorted([
-    *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
-      for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
-    ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
-    ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
-    *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
-], key=lambda c: SMAX_MAPS.index(c[0]))  # map by map (a stable sort keeps each map's order)
-
-# Section 6.3 (Fig. 6b) on GRF, per scenario: individual experience suffices on the two simple
-# tasks (HAPPO, own experience only, nearly perfect); OAPPO and OATRPO are best on the
-# counterattacks (each ends above every other algorithm of the table).
-GRF_CLAIMS = [
-    *((s, optimal, ("happo",), f"{s}: own experience alone (HAPPO) scores nearly perfectly")
-      for s in ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper")),
-    *((s, higher, (ours, other), f"{s}: {ours.upper()} ends above {other.upper()}")
-      for s in ("counterattack_easy", "counterattack_hard") for ours in ("oappo", "oatrpo")
-      for other in ("mappo", "happo", "seac", "seps")),
-]
-# figure -> (the env prefix its ``env`` column carries, its per-env claims)
-ENV_CLAIMS = {"fig4_smax": ("smax:", SMAX_CLAIMS), "fig6b": ("grf:academy_", GRF_CLAIMS)}
-
-# App. A (see ASSUMPTIONS.md): on homogeneous agents, reusing others' experience as it is (SEAC's
-# importance-weighted reuse; MAPPO's one network on everyone's data) ends lower than using one's
-# own (HAPPO), while OAPPO's gated reuse does not.
-CLAIMS["figA_mamujoco"] = [
-    (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
-    (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
-    (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
-    (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)"),
-]
-
-
 def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     """Why the data cannot decide a claim about ``labels``, or None if it can."""
     if ev is None:
@@ -418,19 +351,22 @@ def _check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     return Verdict(claim, NOT_TESTABLE, NOT_TESTABLE, why, "") if why else test(ev, *labels, claim)
 
 
-def claims(figure: str, df: pd.DataFrame) -> list[Verdict]:
-    """Check every claim the paper makes about ``figure`` against that figure's data (a claim
-    the data cannot decide is ``NOT_TESTABLE``, saying why)."""
-    metric = FIGURE_METRICS.get(figure, FRAC_OPT)
-    if figure in ENV_CLAIMS:  # claims per map or scenario, each judged on that env's runs
-        prefix, env_claims = ENV_CLAIMS[figure]
-        envs = df["env"].str.removeprefix(prefix) if len(df) else pd.Series(dtype=str)
-        evidence = {e: Evidence(df[envs == e], metric=metric) for e in set(envs)}
-        return [_check(evidence.get(e), test, labels, claim) for e, test, labels, claim in env_claims]
-    if figure not in CLAIMS:
-        raise ValueError(f"no claims recorded for figure {figure!r}; choose from {sorted([*CLAIMS, *ENV_CLAIMS])}")
-    ev = Evidence(df, metric=metric) if len(df) else None
-    return [_check(ev, test, labels, claim) for test, labels, claim in CLAIMS[figure]]
+def claims(figure, df: pd.DataFrame) -> list[Verdict]:
+    """Check every claim the paper makes about ``figure`` (a ``grid.Figure`` or its id) against
+    that figure's data, measured by its metric (a claim the data cannot decide is
+    ``NOT_TESTABLE``, saying why)."""
+    from oapo_lite import grid  # the grid's entries hold the claims, written with this module's tests
+
+    fig = grid.get_figure(figure)
+    if not fig.claims:
+        raise ValueError(f"no claims recorded for figure {fig.id!r}; choose from "
+                         f"{sorted(f.id for f in grid.GRID if f.claims)}")
+    if fig.claims_per_env:  # claims per map or scenario, each judged on that env's runs
+        envs = df["env"].str.removeprefix(fig.claims_per_env) if len(df) else pd.Series(dtype=str)
+        evidence = {e: Evidence(df[envs == e], metric=fig.metric) for e in set(envs)}
+        return [_check(evidence.get(e), test, labels, claim) for e, test, labels, claim in fig.claims]
+    ev = Evidence(df, metric=fig.metric) if len(df) else None
+    return [_check(ev, test, labels, claim) for test, labels, claim in fig.claims]
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:

@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 import torch
 
-from oapo_lite import __main__ as cli
+from oapo_lite import __main__ as cli, grid
 from oapo_lite import experiments, store
 from oapo_lite.executors import train_job
 from oapo_lite.losses import Diverged
@@ -182,7 +182,7 @@ def test_a_finished_run_with_a_damaged_results_csv_rewrites_it_from_its_checkpoi
 
 def _cache(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    (cfg,) = [c for _, c in experiments.figure_runs("fig1", "smoke")]
+    (cfg,) = [c for _, c in grid.figure_runs("fig1", "smoke")]
     assert experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False).done == 1
     return cfg, experiments.run_path(cfg, "smoke")
 

@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from oapo_lite import claims, experiments, verdicts
+from oapo_lite import claims, grid, verdicts
 
 import fakes
 
 
 def write_runs(figure, budget, plateau):
     """A fake finished run per (label, seed): a ramp to ``plateau[label]`` of the optimum."""
-    for label, cfg in experiments.figure_runs(figure, budget):
+    for label, cfg in grid.figure_runs(figure, budget):
         fakes.write_run(cfg, budget, lambda steps: np.minimum(steps / 80_000, 1.0) * plateau[label])
 
 
@@ -22,4 +22,4 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
     table = claims.table(("fig5b",))
     assert set(table["budget"]) == {"paper (5 seeds)"}
     assert (table["verdict"] == verdicts.REPRODUCED).all()  # every claim of Fig. 5b holds in this fake data
-    assert len(table) == len(verdicts.CLAIMS["fig5b"])
+    assert len(table) == len(grid.get_figure("fig5b").claims)

@@ -1,7 +1,7 @@
 """The run cache's names: stable under new defaulted fields, distinct for distinct runs."""
 import pytest
 
-from oapo_lite import experiments
+from oapo_lite import experiments, grid
 from oapo_lite.config import TrainConfig
 
 import fakes
@@ -15,15 +15,15 @@ def test_a_run_id_depends_only_on_fields_that_differ_from_the_defaults():
 
 
 def test_every_paper_run_has_its_own_id():
-    ids = {experiments.run_id(cfg) for fig in experiments.FIGURES
-           for _, cfg in experiments.figure_runs(fig, "paper")}
-    configs = {str(cfg.flat()) for fig in experiments.FIGURES for _, cfg in experiments.figure_runs(fig, "paper")}
+    ids = {experiments.run_id(cfg) for fig in grid.FIGURES
+           for _, cfg in grid.figure_runs(fig, "paper")}
+    configs = {str(cfg.flat()) for fig in grid.FIGURES for _, cfg in grid.figure_runs(fig, "paper")}
     assert len(ids) == len(configs)
 
 
 def test_an_unknown_budget_names_the_known_ones():
     with pytest.raises(ValueError, match="unknown budget 'huge'.*paper"):
-        experiments.get_budget("huge")
+        grid.get_budget("huge")
 
 
 def test_env_names_with_an_unknown_engine_or_map_raise_naming_what_exists():
@@ -34,46 +34,46 @@ def test_env_names_with_an_unknown_engine_or_map_raise_naming_what_exists():
 
 
 def test_paper20_is_paper_with_twenty_seeds():
-    paper, paper20 = experiments.get_budget("paper"), experiments.get_budget("paper20")
+    paper, paper20 = grid.get_budget("paper"), grid.get_budget("paper20")
     assert paper20.seeds == tuple(range(20)) and paper20.seeds[:5] == paper.seeds
     assert (paper20.steps, paper20.eval_every, paper20.eval_episodes) == (paper.steps, paper.eval_every, paper.eval_episodes)
     # the first five seeds are the very runs of the paper budget (same ids)
-    for fig in experiments.MAZE_FIGURES:
-        ids = {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper20")}
-        assert {experiments.run_id(c) for _, c in experiments.figure_runs(fig, "paper")} <= ids
+    for fig in grid.MAZE_FIGURES:
+        ids = {experiments.run_id(c) for _, c in grid.figure_runs(fig, "paper20")}
+        assert {experiments.run_id(c) for _, c in grid.figure_runs(fig, "paper")} <= ids
         # ... and they are trained once: both budgets read the same cache, each writes its own figures
-        for _, c in experiments.figure_runs(fig, "paper"):
+        for _, c in grid.figure_runs(fig, "paper"):
             assert experiments.run_path(c, "paper20") == experiments.run_path(c, "paper")
     assert experiments.figures_dir("paper20") != experiments.figures_dir("paper")
 
 
 def test_the_grid_keeps_every_committed_maze_run_valid():
     """``make reproduce BUDGET=paper`` finds every committed run: the ids did not move."""
-    runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in experiments.figure_runs(fig, "paper")]
+    runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in grid.figure_runs(fig, "paper")]
     committed = {p.stem for p in (experiments.ROOT / "figures" / "data" / "runs").glob("*.csv")}
     assert len(runs) == 81 and {experiments.run_id(cfg) for cfg in runs} <= committed
 
 
 def test_a_new_figure_is_data_with_its_own_budget_overrides():
-    fig = experiments.Figure("sweep", (("a", dict(algo="happo")), ("b", dict(algo="mappo", lr=1e-3))),
+    fig = grid.Figure("sweep", (("a", dict(algo="happo")), ("b", dict(algo="mappo", lr=1e-3))),
                              common=dict(env="black_blue_red"), seeds=2, budgets={"paper": dict(steps=16_000)},
                              cpus=2, gpus=0.5)
-    runs = experiments.runs_of(fig, "paper")
+    runs = grid.runs_of(fig, "paper")
     assert [(r.label, r.cfg.algo, r.cfg.seed) for r in runs] == [("a", "happo", 0), ("a", "happo", 1),
                                                                 ("b", "mappo", 0), ("b", "mappo", 1)]
     assert {(r.cfg.env, r.cfg.steps, r.cfg.eval_every, r.cpus, r.gpus) for r in runs} == \
-        {("black_blue_red", 16_000, experiments.BUDGETS["paper"].eval_every, 2, 0.5)}
+        {("black_blue_red", 16_000, grid.BUDGETS["paper"].eval_every, 2, 0.5)}
     assert runs[2].cfg.lr == 1e-3 and runs[0].cfg.lr == 5e-4
-    assert experiments.runs_of(fig, "smoke")[0].cfg.steps == experiments.BUDGETS["smoke"].steps
+    assert grid.runs_of(fig, "smoke")[0].cfg.steps == grid.BUDGETS["smoke"].steps
     with pytest.raises(ValueError, match="unknown figure 'fig9'.*fig3b"):
-        experiments.runs_of("fig9", "paper")
+        grid.runs_of("fig9", "paper")
 
 
 def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
     from oapo_lite import executors, reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    (cfg,) = [cfg for _, cfg in experiments.figure_runs("fig1", "smoke")]
+    (cfg,) = [cfg for _, cfg in grid.figure_runs("fig1", "smoke")]
 
     def broken(*args, **kwargs):
         raise RuntimeError("a broken run")
@@ -106,10 +106,10 @@ def test_bad_executor_options_name_what_is_allowed(capsys):
 
 
 def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_names():
-    for fig in experiments.FIGURES:  # every run of every figure is a valid config at every budget
-        for budget in experiments.BUDGETS:
-            experiments.runs_of(fig, budget)
-    cpu = {f: experiments.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
+    for fig in grid.FIGURES:  # every run of every figure is a valid config at every budget
+        for budget in grid.BUDGETS:
+            grid.runs_of(fig, budget)
+    cpu = {f: grid.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
     for fig, runs in cpu.items():
         labels = {r.label for r in runs}
         per_curve = {(r.label, r.cfg.env): 0 for r in runs}
@@ -121,21 +121,21 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
         assert {"oappo", "happo", "mappo", "seac"} <= labels, fig
     # SMAX's cpu grid: the two small maps only, with their own steps; the paper's maps at paper
     assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {"smax:3m": 300_000, "smax:2s3z": 500_000}
-    paper = {r.cfg.env: r.cfg.steps for r in experiments.runs_of("fig4_smax", "paper")}
+    paper = {r.cfg.env: r.cfg.steps for r in grid.runs_of("fig4_smax", "paper")}
     assert paper["smax:6h_vs_8z"] == 40_000_000 and len(paper) == 5
     # A2C runs evaluate at the same env steps as the PPO family on an engine's batch shape too
     by_algo = {r.cfg.algo: r.cfg for r in cpu["fig4_smax"] if r.cfg.env == "smax:3m" and r.cfg.seed == 0}
     ppo, a2c = by_algo["oappo"], by_algo["seac"]
     assert ppo.eval_every * ppo.n_envs * ppo.rollout_len == a2c.eval_every * a2c.n_envs * a2c.n_step
     # the engine figures have no runs at the maze-only budgets, and a bad budget is named
-    assert experiments.runs_of("fig4_smax", "paper20") == []
+    assert grid.runs_of("fig4_smax", "paper20") == []
     with pytest.raises(ValueError, match="unknown budget 'huge'"):
-        experiments.runs_of("fig4_smax", "huge")
+        grid.runs_of("fig4_smax", "huge")
 
 
 def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    runs = experiments.runs_of("fig4_smax", "smoke")
+    runs = grid.runs_of("fig4_smax", "smoke")
     assert experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True).empty
     cfg = runs[0].cfg
     fakes.write_run(cfg, "smoke", lambda steps: steps / 6400, grid=1, env=cfg.env)

@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from oapo_lite import experiments
+from oapo_lite import experiments, grid
 from oapo_lite.__main__ import main
 from oapo_lite.envs import grf
 from oapo_lite.config import TrainConfig
@@ -101,12 +101,12 @@ def test_a_grf_run_trains_end_to_end(tmp_path):
 
 
 def test_fig6b_budgets_are_data_and_every_run_has_its_own_id():
-    for budget in experiments.ENGINE_BUDGETS:
-        runs = experiments.figure_runs("fig6b", budget)
-        assert {label for label, _ in runs} == set(experiments.FIG6B_ALGOS)
+    for budget in grid.ENGINE_BUDGETS:
+        runs = grid.figure_runs("fig6b", budget)
+        assert {label for label, _ in runs} == set(grid.FIG6B_ALGOS)
         assert len({experiments.run_id(cfg) for _, cfg in runs}) == len(runs)
-    paper = experiments.figure_runs("fig6b", "paper")
+    paper = grid.figure_runs("fig6b", "paper")
     assert {cfg.env for _, cfg in paper} == {f"grf:{s}" for s in grf.SCENARIOS}
     assert {cfg.steps for _, cfg in paper if cfg.env == "grf:academy_counterattack_hard"} == {50_000_000}
     with pytest.raises(ValueError, match="unknown budget 'huge'"):
-        experiments.figure_runs("fig6b", "huge")
+        grid.figure_runs("fig6b", "huge")

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oapo_lite import experiments
-from oapo_lite.experiments import Figure
+from oapo_lite import experiments, grid
+from oapo_lite.grid import Figure
 
 # The head node lives in its own process (so that other drivers, including a killed one, come
 # and go); it stops when the test closes its stdin.
@@ -81,7 +81,7 @@ def run_files(runs: Path) -> dict[str, bytes]:
 
 
 # the maze figures: the engines' smoke runs are exercised by reproduce in CI and by their own tests
-MAZES = experiments.MAZE_FIGURES
+MAZES = grid.MAZE_FIGURES
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_a_run_that_raises_is_reported_and_the_others_complete(executor, request
     with figures_at(tmp_path) as runs:
         count = experiments.run_all("smoke", figures=(broken,), executor=executor, address=address,
                                     progress=False)
-        paths = {r.label: experiments.run_path(r.cfg, "smoke") for r in experiments.runs_of(broken, "smoke")}
+        paths = {r.label: experiments.run_path(r.cfg, "smoke") for r in grid.runs_of(broken, "smoke")}
         assert list(runs.glob("*.csv")) == [paths["good"]]
     assert count.done == 1 and [f.run.label for f in count.failed] == ["bad"]
     error = count.failed[0].error

@@ -4,6 +4,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
+from oapo_lite import grid
 from oapo_lite import verdicts as v
 
 
@@ -174,7 +175,7 @@ def test_claim_table_has_a_row_per_budget_and_claim():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
                    "oatrpo": (30_000, 1.0)})
     table = v.claim_table({"five": v.claims("fig3b", good), "one": v.claims("fig3b", good[good["seed"] == 0])})
-    assert len(table) == 2 * len(v.CLAIMS["fig3b"])
+    assert len(table) == 2 * len(grid.get_figure("fig3b").claims)
     by = table.set_index("budget")
     assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
     assert (by.loc["one", "verdict"] == v.NOT_TESTABLE).all()  # one seed cannot decide anything

@@ -1,0 +1,294 @@
+"""The grid: how much a budget spends, and every figure the project reproduces as one entry
+(``GRID``): its curves, its budgets, the measure its curves are judged on and the paper's
+claims about it. A new figure is a new entry; ``runs_of`` turns an entry into training runs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.reuse import SCHEMES
+from oapo_lite.verdicts import FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, stabler, stuck
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How much to spend on each curve of each figure."""
+
+    seeds: tuple[int, ...]
+    steps: int  # env steps per run
+    eval_every: int  # iterations between evaluations
+    eval_episodes: int
+    config: dict = field(default_factory=dict)  # further TrainConfig fields (batch shape, episode length)
+
+
+BUDGETS = {
+    "smoke": Budget(seeds=(0,), steps=3_200, eval_every=1, eval_episodes=8),
+    "paper": Budget(seeds=(0, 1, 2, 3, 4), steps=240_000, eval_every=2, eval_episodes=32),
+    "paper20": Budget(seeds=tuple(range(20)), steps=240_000, eval_every=2, eval_episodes=32),
+}
+# "cpu": the largest budget this machine (2 cores) can honestly run. The mazes' paper scale
+# fits a CPU, so for them it is the paper budget (same runs, same cache); the real engines
+# override it per figure (``Figure.budgets``) with what fits in one or two hours.
+BUDGETS["cpu"] = BUDGETS["paper"]
+COMMITTED = ("paper", "cpu")  # the budgets whose figures and runs are committed under figures/
+# paper20's figures go to figures/paper20/, but its runs share the committed cache: a run id
+# hashes the run's whole config, so its seeds 0-4 are the paper budget's runs, trained once.
+SHARED_RUNS = COMMITTED + ("paper20",)
+
+
+def get_budget(name: str) -> Budget:
+    if name not in BUDGETS:
+        raise ValueError(f"unknown budget {name!r}; choose from {sorted(BUDGETS)}")
+    return BUDGETS[name]
+
+
+# Section 6.1's figures: which curves, with which settings.
+SIGMAS = (0.01, 0.1, 1.0, 10.0)
+LAMBDAS = (0.2, 0.4, 0.7, 1.0)
+# Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
+# lambda = 1 / group size (NR's learners keep everything for themselves anyway).
+SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
+# SEAC / SePS (A2C, 5-step rollouts) run 16 env copies: 80 env steps an update, 20 updates per
+# PPO iteration of 32 x 50 steps; their evaluations and checkpoints are spaced 20 x as many
+# iterations apart, so every curve is evaluated at the same env steps. SePS pre-trains for the
+# first tenth of the budget, counted in its env steps.
+A2C_ENVS = 16
+BASELINE_ALGOS = ("seac", "seps", "mappo", "happo", "oappo")
+MAZES = ("black_red", "black_blue_red")
+ADAPTIVE_CURVES = (("oappo adaptive", dict(algo="oappo", reuse_adapt="gradient_test")),
+                   ("oappo", dict(algo="oappo")), ("happo", dict(algo="happo")))
+
+
+@dataclass(frozen=True)
+class Figure:
+    """The runs behind one figure, as data: every curve is trained on every seed of the budget.
+
+    ``curves``: (label, TrainConfig fields of that curve); ``common``: fields every curve shares
+    (env, batch shape, ...); ``seeds``: how many of the budget's seeds (None: all);
+    ``budgets``: per-budget overrides of ``Budget`` fields for this figure (a real engine needs
+    more env steps than a maze), e.g. ``{"paper": {"steps": 10_000_000}}``; under the key
+    ``envs``, overrides for one env alone, and then only the curves on those envs run at that
+    budget; ``runs_at``: the budgets the figure has runs at (None: every budget); ``cpus``,
+    ``gpus``, ``memory_gb``: what one run asks a Ray cluster for. ``metric``: what its curves
+    measure; ``claims``: the paper's claims about it, as (test, the curves it compares, the
+    claim), judged by ``verdicts.claims``; with ``claims_per_env`` (the prefix of the ``env``
+    column) each claim starts with the env it is judged on, on that env's runs alone.
+    """
+
+    id: str
+    curves: tuple[tuple[object, dict], ...]
+    common: dict = field(default_factory=dict)
+    seeds: int | None = None
+    budgets: dict = field(default_factory=dict)
+    runs_at: tuple[str, ...] | None = None
+    cpus: float = 1.0
+    gpus: float = 0.0
+    memory_gb: float = 0.0
+    metric: Metric = FRAC_OPT
+    claims: tuple = ()
+    claims_per_env: str | None = None
+
+    def budget(self, name: str, env: str | None = None) -> Budget:
+        """This figure's budget ``name`` (for the curves on ``env``, if it has its own)."""
+        own = dict(self.budgets.get(name, {}))
+        envs = own.pop("envs", {})
+        return replace(get_budget(name), **{**own, **envs.get(env, {})})
+
+    def envs(self, name: str) -> tuple[str, ...] | None:
+        """The envs this figure runs at budget ``name`` (None: every curve's)."""
+        envs = self.budgets.get(name, {}).get("envs")
+        return None if envs is None else tuple(envs)
+
+
+# Fig. 4 (Section 6.2) on SMAX. Per-map settings every budget shares: HARL's tuned SMAC settings
+# (ANCHORS.md) on the paper's maps, TrainConfig's (HARL's defaults) on the small ones. 64 copies
+# x 50 steps is HARL's batch of 20 threads x 160 steps (3,200 transitions).
+SMAX_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
+SMAX_BATCH = dict(n_envs=64, rollout_len=50, max_steps=100, checkpoint_every=10)
+_PAPER_MAP = dict(gamma=0.95, hidden=(64, 64, 64))
+SMAX_MAP_SETTINGS = {
+    "3m": {},
+    "2s3z": {},
+    "6h_vs_8z": dict(_PAPER_MAP, clip=0.05, ppo_epochs=10, n_minibatch=2, kl_threshold=0.001),
+    "3s5z_vs_3s6z": dict(_PAPER_MAP, clip=0.1, ppo_epochs=5, n_minibatch=2, kl_threshold=0.005),
+    "MMM2_like_7m2M_vs_8m3M": dict(_PAPER_MAP, clip=0.2, ppo_epochs=5, n_minibatch=1, kl_threshold=0.06),
+}
+
+
+# App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO) and
+# direct reuse (SEAC) on homogeneous agents.
+FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
+# Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
+FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
+GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
+# HARL's tuned GRF settings (ANCHORS.md); the engine itself ends academy episodes (<= 400 steps)
+GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_steps=400)
+ENGINE_BUDGETS = ("smoke", "cpu", "paper")
+
+# The claims of Section 6.1 (Fig. 3c-d compare the paper's sigma and lambda, TrainConfig's
+# defaults, with the other values of the sweeps)
+SIGMA_REASONS = ("own experience only is slower", "irrelevant experience confuses", "all peers' experience hinders")
+LAM_02, LAM_04, LAM_07, LAM_1 = LAMBDAS
+# Section 6.2 (Fig. 4) on SMAX, per map. The paper's heterogeneous maps are 3s5z_vs_3s6z and MMM2
+# (here its stand-in); 2s3z is heterogeneous too and small enough to learn on a CPU.
+SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+SMAX_CLAIMS = sorted([
+    *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
+      for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
+    ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
+    ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
+    *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAP_SETTINGS),
+], key=lambda c: list(SMAX_MAP_SETTINGS).index(c[0]))  # map by map (a stable sort keeps each map's order)
+# Section 6.3 (Fig. 6b) on GRF, per scenario: individual experience suffices on the two simple
+# tasks (HAPPO, own experience only, nearly perfect); OAPPO and OATRPO are best on the
+# counterattacks (each ends above every other algorithm of the table).
+GRF_CLAIMS = [
+    *((s, optimal, ("happo",), f"{s}: own experience alone (HAPPO) scores nearly perfectly")
+      for s in GRF_SCENARIOS[:2]),
+    *((s, higher, (ours, other), f"{s}: {ours.upper()} ends above {other.upper()}")
+      for s in GRF_SCENARIOS[2:] for ours in ("oappo", "oatrpo") for other in ("mappo", "happo", "seac", "seps")),
+]
+
+# Every figure the project reproduces; a new figure is a new entry here.
+GRID = (
+    Figure("fig3b", tuple((a, dict(algo=a)) for a in ("oappo", "oatrpo", "mappo", "happo")),
+           common=dict(env="black_red"), claims=(
+               (stuck, ("mappo",), "MAPPO (shared parameters) stays below the optimum"),
+               (faster, ("oappo", "happo"), "OAPPO converges faster than HAPPO"),
+               (faster, ("oatrpo", "happo"), "OATRPO converges faster than HAPPO"),
+               (higher, ("oappo", "mappo"), "OAPPO ends above MAPPO"),
+               (higher, ("oatrpo", "mappo"), "OATRPO ends above MAPPO"),
+               (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO"))),
+    Figure("fig3c", tuple((s, dict(algo="oappo", sigma=s)) for s in SIGMAS), common=dict(env="black_red"),
+           claims=tuple((better, (TrainConfig.sigma, s), f"sigma = {TrainConfig.sigma:g} beats sigma = {s:g} ({why})")
+                        for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS))),
+    Figure("fig3d", tuple((lam, dict(algo="oappo", lam=lam)) for lam in LAMBDAS), common=dict(env="black_red"),
+           claims=((better, (LAM_07, LAM_04), f"lambda = {LAM_07:g} is marginally better than lambda = {LAM_04:g}"),
+                   (better, (LAM_04, LAM_1), f"lambda = {LAM_04:g} beats lambda = {LAM_1:g} (own experience only)"),
+                   (better, (LAM_04, LAM_02), f"lambda = {LAM_04:g} beats lambda = {LAM_02:g} (mostly others' "
+                                              "experience)"))),
+    # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that the mask
+    # alone decides, as in the paper's "modified OAPPO parameters".
+    Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), lam=SCHEME_LAM[s]))
+                          for s in SCHEMES), common=dict(env="black_blue_red"), claims=(
+               (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
+               (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
+               (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
+               (optimal, ("NR",), "NR (no reuse) reaches the optimum"))),
+    Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
+    # label: the algorithm; the maze is the ``env`` column
+    Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
+    # Issue 12's adaptive reuse rule against the fixed Eq. 9 (sigma 0.1, lambda 0.7: the best of
+    # Fig. 3c-d's grid) and no reuse, on both paper mazes; and both at lambda 0.4 on Black-Red,
+    # where the fixed rule is trapped (Fig. 3d)
+    Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)
+           + tuple((f"{label} lambda=0.4", dict(env="black_red", lam=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2])),
+    # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
+    # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
+    # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).
+    Figure("fig4_smax", tuple((a, dict(algo=a, env=f"smax:{m}", **kw)) for m, kw in SMAX_MAP_SETTINGS.items()
+                              for a in SMAX_ALGOS),
+           common=SMAX_BATCH, runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
+               "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
+                                                   "smax:2s3z": dict(steps=500_000, eval_every=10)}),
+               "paper": dict(eval_episodes=64, eval_every=25, envs={
+                   "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
+                   "smax:6h_vs_8z": dict(steps=40_000_000), "smax:3s5z_vs_3s6z": dict(steps=20_000_000),
+                   "smax:MMM2_like_7m2M_vs_8m3M": dict(steps=20_000_000)}),
+           }, metric=WIN_RATE, claims=tuple(SMAX_CLAIMS), claims_per_env="smax:"),
+    # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
+    Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env="mamujoco:HalfCheetah-2x3"),
+           runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100)),
+               "cpu": dict(steps=200_000, eval_every=5, eval_episodes=3,
+                           config=dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)),
+               "paper": dict(steps=10_000_000, eval_every=25, eval_episodes=10,
+                             config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
+           }, metric=RETURN, claims=(
+               # (ASSUMPTIONS.md) on homogeneous agents, reusing others' experience as it is (SEAC's
+               # importance-weighted reuse; MAPPO's one network on everyone's data) ends lower than
+               # using one's own (HAPPO), while OAPPO's gated reuse does not
+               (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
+               (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
+               (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
+               (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)"))),
+    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
+    # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run), so 18
+    # runs of 32k steps on 3_vs_1_with_keeper (the scenario HARL learns fastest) fit 2 hours.
+    Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
+           runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": dict(steps=160, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
+                             envs={"grf:academy_3_vs_1_with_keeper": {}}),
+               "cpu": dict(seeds=(0, 1, 2), steps=32_000, eval_every=4, eval_episodes=16,
+                           config=dict(GRF_HARL, n_envs=8, rollout_len=200),
+                           envs={"grf:academy_3_vs_1_with_keeper": {}}),
+               "paper": dict(steps=25_000_000, eval_every=25, config=dict(GRF_HARL, n_envs=50, rollout_len=200),
+                             envs={f"grf:academy_{s}": {} for s in GRF_SCENARIOS[:3]}
+                             | {"grf:academy_counterattack_hard": dict(
+                                 steps=50_000_000, config=dict(GRF_HARL, n_envs=50, rollout_len=1000))}),
+           }, metric=SCORE, claims=tuple(GRF_CLAIMS), claims_per_env="grf:academy_"),
+)
+FIGURES = tuple(f.id for f in GRID)
+MAZE_FIGURES = tuple(f.id for f in GRID if f.runs_at is None)  # Section 6.1; the others run real engines
+
+
+def get_figure(figure: "Figure | str") -> Figure:
+    if isinstance(figure, Figure):
+        return figure
+    known = {f.id: f for f in GRID}
+    if figure not in known:
+        raise ValueError(f"unknown figure {figure!r}; choose from {sorted(known)}")
+    return known[figure]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One training run of a figure and what it needs (for a Ray cluster)."""
+
+    figure: str
+    label: object
+    cfg: TrainConfig
+    cpus: float = 1.0
+    gpus: float = 0.0
+    memory_gb: float = 0.0
+
+
+def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
+    """A figure's runs at a budget: curve by curve, seed by seed."""
+    fig = get_figure(figure)
+    get_budget(budget)  # a bad name fails here, even for a figure without runs at it
+    if fig.runs_at is not None and budget not in fig.runs_at:
+        return []
+    envs, runs = fig.envs(budget), []
+    for label, kw in fig.curves:
+        env = {**fig.common, **kw}.get("env", TrainConfig.env)
+        if envs is not None and env not in envs:
+            continue
+        b = fig.budget(budget, env)
+        seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
+        runs += [Run(fig.id, label, _config(b, seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
+                 for s in seeds]
+    return runs
+
+
+def _config(b: Budget, **kw) -> TrainConfig:
+    """A run's config at budget ``b``; A2C runs are evaluated and checkpointed at the same env
+    steps as the PPO family's (see ``A2C_ENVS``)."""
+    kw = {**b.config, **kw}
+    if not ALGOS[kw["algo"]].a2c:
+        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
+    batch = kw.get("n_envs", TrainConfig.n_envs) * kw.get("rollout_len", TrainConfig.rollout_len)
+    ratio = max(1, batch // (A2C_ENVS * TrainConfig.n_step))
+    if kw["algo"] == "seps":
+        kw["seps_pretrain_steps"] = max(b.steps // 10, A2C_ENVS * TrainConfig.n_step)  # >= one update
+    kw |= dict(n_envs=A2C_ENVS, checkpoint_every=kw.get("checkpoint_every", TrainConfig.checkpoint_every) * ratio)
+    return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes, **kw)
+
+
+def figure_runs(figure: "Figure | str", budget: str) -> list[tuple[object, TrainConfig]]:
+    """(label, config) of every run of a figure."""
+    return [(r.label, r.cfg) for r in runs_of(figure, budget)]
+
+
