@@ -24,7 +24,7 @@ def table(figures: tuple[str, ...], budgets: tuple[str, ...] = SEED_BUDGETS) -> 
         if all(on_disk(f, budget) for f in figures):
             name = f"{budget} ({len(grid.get_budget(budget).seeds)} seeds)"
             by_budget[name] = [v for f in figures
-                               for v in verdicts.claims(f, experiments.load_figure(f, budget, run_missing=False))]
+                               for v in verdicts.claims(f, experiments.load_figure(f, budget))]
     if not by_budget:
         raise FileNotFoundError(f"no budget in {budgets} has every run of {figures} on disk")
     return verdicts.claim_table(by_budget)

@@ -22,8 +22,9 @@ import pandas as pd
 from oapo_lite.config import TrainConfig
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
+from oapo_lite import grid
 from oapo_lite.grid import COMMITTED, FIGURES, SHARED_RUNS, Run, figure_runs, runs_of
-from oapo_lite.store import DamagedFile, atomic_write
+from oapo_lite.store import DamagedFile, read_arrays, write_frame
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -90,7 +91,13 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
                           f"{len(df)} rows; {RETRAIN}")
     if (df["seed"].astype(str) != str(cfg.seed)).any() or (df["algo"].astype(str) != cfg.algo).any():
         raise DamagedFile(f"run file {path} holds another run's rows (seed or algo differ); {RETRAIN}")
-    return df
+    try:
+        return read_arrays(df, MATRICES)
+    except ValueError as err:  # not JSON
+        raise DamagedFile(f"run file {path} has a matrix that is not JSON ({err}); {RETRAIN}") from None
+
+
+MATRICES = ("kl_matrix", "reuse_matrix", "agreement")  # per-iteration matrices, arrays once read
 
 
 RETRAIN = "delete it, or let `python -m oapo_lite reproduce` train the run again"
@@ -106,10 +113,6 @@ def on_disk(cfg: TrainConfig, budget: str) -> bool:
         print(f"warning: {err}", file=sys.stderr)
         return False
     return True
-
-
-def write_csv_atomic(df: pd.DataFrame, path: Path) -> None:
-    atomic_write(lambda p: df.to_csv(p, index=False), path)
 
 
 def grid_runs(budget: str, figures=FIGURES) -> list[Run]:
@@ -187,7 +190,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
         for k, (run, rows, error) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
                                                                               address=address), 1):
             if error is None:
-                write_csv_atomic(rows, run_path(run.cfg, budget))
+                write_frame(rows, run_path(run.cfg, budget))
             else:
                 failed.append(Failure(run, error))
                 tqdm.write(failed[-1].report(), file=sys.stderr)
@@ -204,24 +207,33 @@ def missing_runs(figure: str, budget: str) -> list[Run]:
     return [r for r in runs_of(figure, budget) if not on_disk(r.cfg, budget)]
 
 
-def load_figure(figure: str, budget: str, run_missing: bool = True, skip_missing: bool = False) -> pd.DataFrame:
-    """The tidy rows of one figure (training its missing runs first, if asked; or, with
-    ``skip_missing``, leaving out the runs not on disk: ``missing_runs`` names them, and with
-    none on disk the frame is empty and no CSV is written)."""
-    if run_missing:
-        failed = run_all(budget, figures=(figure,), progress=False).failed
-        if failed:
-            raise RuntimeError(f"{len(failed)} run(s) of {figure} failed (reported above)")
+def train_runs(budget: str, figures, workers: int = 2) -> None:
+    """Train the runs of ``figures`` at ``budget`` that are not on disk yet, and raise if any
+    failed: loading a figure never trains, so a notebook that may train says so with this call."""
+    failed = run_all(budget, figures=figures, workers=workers, progress=False).failed
+    if failed:
+        raise RuntimeError(f"{len(failed)} run(s) of {[grid.get_figure(f).id for f in figures]} failed "
+                           "(reported above)")
+
+
+def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
+    """The tidy rows of one figure, read from the run cache (nothing is trained: ``train_runs``).
+    A run not on disk raises naming it, or with ``skip_missing`` is left out (``missing_runs``
+    names them; with none on disk the frame is empty and no CSV is written)."""
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
         if skip_missing and not on_disk(cfg, budget):
             missing.append(run_id(cfg))
             continue
+        if not run_path(cfg, budget).exists():
+            raise FileNotFoundError(f"run {run_id(cfg)} of {figure} (curve {label!r}) is not on disk; train it with "
+                                    f"`python -m oapo_lite reproduce --budget {budget} --figures {figure}` or "
+                                    "experiments.train_runs")
         frames.append(read_run(cfg, budget).assign(label=label, figure=figure))
     if not frames:
         return pd.DataFrame()
     df = pd.concat(frames, ignore_index=True)
-    write_csv_atomic(df, data_dir(budget) / f"{figure}.csv")
+    write_frame(df, data_dir(budget) / f"{figure}.csv")
     if missing:
         print(f"warning: {figure} at budget {budget!r} leaves out {len(missing)} runs not on disk (missing_runs)")
     revisions = sorted(df["git_rev"].astype(str).unique())

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from oapo_lite import experiments, grid, verdicts
+from oapo_lite import experiments, grid, store, verdicts
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
 from oapo_lite.config import TrainConfig
 
@@ -39,14 +39,10 @@ def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
             for fig in figures(layouts) for label, cfg in grid.figure_runs(fig, budget)]
 
 
-def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
-    """Tidy rows of the study (training missing runs first, one at a time, if asked); the
-    whole study's runs, one row each (``per_run``), are also written to
-    ``<data>/fig_layout_study.csv``: what its figure is drawn from."""
-    if run_missing:
-        failed = experiments.run_all(budget, figures=figures(layouts), workers=1, progress=False).failed
-        if failed:
-            raise RuntimeError(f"{len(failed)} run(s) of the layout study failed (reported above)")
+def load(budget: str, layouts=None) -> pd.DataFrame:
+    """Tidy rows of the study, read from the run cache (``experiments.train_runs(budget,
+    figures())`` trains what is missing); the whole study's runs, one row each (``per_run``),
+    are also written to ``<data>/fig_layout_study.csv``: what its figure is drawn from."""
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         if not experiments.run_path(cfg, budget).exists():
@@ -55,7 +51,7 @@ def load(budget: str, layouts=None, run_missing: bool = True) -> pd.DataFrame:
         frames.append(experiments.read_run(cfg, budget).assign(layout=name, label=label))
     df = pd.concat(frames, ignore_index=True)
     if layouts is None:
-        experiments.write_csv_atomic(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")
+        store.write_frame(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")
     return df
 
 

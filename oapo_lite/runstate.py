@@ -17,7 +17,7 @@ from oapo_lite.a2c import Learner as A2CLearner
 from oapo_lite.config import ALGOS, TrainConfig
 from oapo_lite.nets import Actors
 from oapo_lite.rollout import make_env
-from oapo_lite.store import DamagedFile, atomic_write
+from oapo_lite.store import DamagedFile, atomic_write, write_frame
 from oapo_lite.update import Learner
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
@@ -107,7 +107,7 @@ class RunState:
 
 
 def save_results(rows: list[dict], out: Path) -> None:
-    atomic_write(lambda p: pd.DataFrame(rows).to_csv(p, index=False), out / "results.csv")
+    write_frame(pd.DataFrame(rows), out / "results.csv")
 
 
 def load_checkpoint(out_dir: str | Path) -> dict:

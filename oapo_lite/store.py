@@ -7,10 +7,14 @@ an ``flock`` on a file: the kernel releases it when its holder dies, however it 
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import socket
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
+import pandas as pd
 
 _HOST = socket.gethostname().replace("-", "_")
 
@@ -56,6 +60,25 @@ def atomic_write(write: Callable[[str], None], path: Path) -> None:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def write_frame(df: pd.DataFrame, path: Path) -> None:
+    """``df`` as CSV, written atomically; a cell that holds an array (a per-iteration matrix
+    such as Eq. 9's K or M) is written as its JSON text (``read_arrays`` reads it back)."""
+    def text(x):
+        return json.dumps(x.tolist()) if isinstance(x, np.ndarray) else x
+
+    arrays = [c for c in df.columns if df[c].dtype == object and df[c].map(lambda x: isinstance(x, np.ndarray)).any()]
+    df = df.assign(**{c: df[c].map(text) for c in arrays})
+    atomic_write(lambda p: df.to_csv(p, index=False), path)
+
+
+def read_arrays(df: pd.DataFrame, columns) -> pd.DataFrame:
+    """``df`` with the JSON text of ``columns`` (those it has) turned back into arrays."""
+    def array(x):
+        return np.array(json.loads(x)) if isinstance(x, str) else x
+
+    return df.assign(**{c: df[c].map(array) for c in columns if c in df.columns})
 
 
 class Lock:

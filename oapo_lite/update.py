@@ -5,7 +5,6 @@ sequential factor, and the centralised critic. ``Learner`` holds what only this 
 (critic, value normaliser, optimisers, the update-order generator) and is what the loop drives."""
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 
@@ -281,10 +280,10 @@ class Learner:
             "train_return": mean_or_nan(batch.episode_returns),
             "objective": float(np.mean(objectives)), "value_loss": critic_loss,
             "trpo_kl": mean_or_nan(accepted), "trpo_accepted": len(accepted),
-            "kl_matrix": json.dumps(np.round(K, 6).tolist()), "reuse_matrix": json.dumps(np.round(M, 6).tolist()),
+            "kl_matrix": np.round(K, 6), "reuse_matrix": np.round(M, 6),
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
-            metrics["agreement"] = json.dumps(np.round(C, 6).tolist())
+            metrics["agreement"] = np.round(C, 6)
         return metrics, {"trpo_kls": trpo_kls}
 
     def state_dict(self) -> dict:

@@ -2,7 +2,7 @@
 import numpy as np
 import pandas as pd
 
-from oapo_lite import experiments
+from oapo_lite import experiments, store
 
 
 def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataFrame:
@@ -14,5 +14,5 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     df = pd.DataFrame({"algo": cfg.algo, "seed": cfg.seed, "iteration": steps // (cfg.n_envs * cfg.rollout_steps),
                        "step": steps, "eval_return": value, "frac_opt": value, "eval_success": value,
                        "git_rev": "test", **columns})
-    experiments.write_csv_atomic(df, experiments.run_path(cfg, budget))
+    store.write_frame(df, experiments.run_path(cfg, budget))
     return df

@@ -1,6 +1,5 @@
 """The adaptive reuse rule (oapo_lite/adaptive.py): a hand-computed case, its limiting cases,
 the no-new-fixed-point property, bad inputs, and its place in the training loop."""
-import json
 
 import numpy as np
 import pytest
@@ -208,7 +207,7 @@ def test_adaptive_runs_log_eq9_times_agreement_and_default_runs_are_untouched(tm
         rows = train(TrainConfig(algo="oappo", reuse_adapt=rule, **SMALL_BR), tmp_path / rule,
                      resume=False, progress=False)
         for _, r in rows.iloc[1:].iterrows():
-            k, c, m = (np.array(json.loads(r[col])) for col in ("kl_matrix", "agreement", "reuse_matrix"))
+            k, c, m = (r[col] for col in ("kl_matrix", "agreement", "reuse_matrix"))
             assert np.allclose(m, adaptive.agreement_matrix(reuse.oapo_matrix(k, 0.1, 0.7), c, rule), atol=1e-5)
             assert (np.diag(m) >= 0.7 - 1e-9).all()
     again = train(TrainConfig(algo="oappo", reuse_adapt=rule, **SMALL_BR), tmp_path / "again",

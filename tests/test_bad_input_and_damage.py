@@ -201,12 +201,12 @@ def test_the_run_cache_is_checked_when_read_and_a_damaged_run_is_trained_again(t
     good = path.read_bytes()
     damage(pd.read_csv(path), path)
     with pytest.raises(store.DamagedFile, match=f"run file {re.escape(str(path))} .*{words}"):
-        experiments.load_figure("fig1", "smoke", run_missing=False)
+        experiments.load_figure("fig1", "smoke")
     assert experiments.missing_runs("fig1", "smoke")[0].cfg == cfg
     assert f"warning: run file {path}" in capsys.readouterr().err
     count = experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False)
     assert (count.done, count.cached) == (1, 0) and path.read_bytes() == good
-    assert experiments.load_figure("fig1", "smoke", run_missing=False)["step"].is_monotonic_increasing
+    assert experiments.load_figure("fig1", "smoke")["step"].is_monotonic_increasing
 
 
 def test_a_second_trainer_of_a_run_waits_and_then_trains_nothing_again(tmp_path, capfd):

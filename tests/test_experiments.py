@@ -1,4 +1,8 @@
 """The run cache's names: stable under new defaulted fields, distinct for distinct runs."""
+import json
+
+import numpy as np
+import pandas as pd
 import pytest
 
 from oapo_lite import experiments, grid
@@ -136,9 +140,36 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
 def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     runs = grid.runs_of("fig4_smax", "smoke")
-    assert experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True).empty
+    assert experiments.load_figure("fig4_smax", "smoke", skip_missing=True).empty
     cfg = runs[0].cfg
     fakes.write_run(cfg, "smoke", lambda steps: steps / 6400, grid=1, env=cfg.env)
-    df = experiments.load_figure("fig4_smax", "smoke", run_missing=False, skip_missing=True)
+    df = experiments.load_figure("fig4_smax", "smoke", skip_missing=True)
     assert set(df["label"]) == {runs[0].label} and len(df) == len(cfg.eval_steps) == 3
     assert experiments.missing_runs("fig4_smax", "smoke") == runs[1:]
+    with pytest.raises(FileNotFoundError, match=f"run {experiments.run_id(runs[1].cfg)} of fig4_smax .*not on disk"):
+        experiments.load_figure("fig4_smax", "smoke")  # loading never trains
+
+
+def test_train_runs_trains_what_is_missing_and_names_failures(tmp_path, monkeypatch):
+    from oapo_lite import executors
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    experiments.train_runs("smoke", ["fig1"], workers=1)
+    assert experiments.missing_runs("fig1", "smoke") == [] and len(experiments.load_figure("fig1", "smoke")) == 3
+    monkeypatch.setattr(executors, "train", lambda *args, **kwargs: 1 / 0)
+    with pytest.raises(RuntimeError, match=r"4 run\(s\) of \['fig3b'\] failed"):
+        experiments.train_runs("smoke", ["fig3b"], workers=1)
+
+
+def test_matrices_are_arrays_in_memory_and_json_in_csv(tmp_path):
+    from oapo_lite import store
+
+    rng = np.random.default_rng(0)
+    mats = [np.round(rng.random((3, 3)), 6), np.array([[1.0, np.inf], [0.0, 1.0]])]
+    df = pd.DataFrame({"step": [0, 1, 2], "kl_matrix": [np.nan, *mats], "label": ["a", "b", "c"]})
+    store.write_frame(df, tmp_path / "x.csv")
+    text = pd.read_csv(tmp_path / "x.csv")
+    assert text["kl_matrix"].iloc[1] == json.dumps(mats[0].tolist()) and text["kl_matrix"].isna().iloc[0]
+    back = store.read_arrays(text, experiments.MATRICES)
+    assert all(np.array_equal(a, b) for a, b in zip(back["kl_matrix"].iloc[1:], mats))
+    assert back["kl_matrix"].isna().iloc[0] and list(back["label"]) == ["a", "b", "c"]

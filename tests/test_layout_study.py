@@ -25,7 +25,7 @@ def test_unknown_layout_and_missing_runs_raise(tmp_path, monkeypatch):
         layout_study.study_runs("smoke", ["nowhere"])
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     with pytest.raises(FileNotFoundError, match="is not on disk"):
-        layout_study.load("smoke", run_missing=False)
+        layout_study.load("smoke")
 
 
 def test_tables_read_the_runs(tmp_path, monkeypatch):
@@ -37,7 +37,7 @@ def test_tables_read_the_runs(tmp_path, monkeypatch):
     for _, label, cfg in layout_study.study_runs("paper", [name]):
         fakes.write_run(cfg, "paper", lambda steps: np.minimum(steps / reach.get(label, 64_000), 1.0)
                         * (0.2 if label == "oappo lambda=0.2" else 1.0))
-    df = layout_study.load("paper", [name], run_missing=False)
+    df = layout_study.load("paper", [name])
     table = layout_study.table(df)
     assert table.loc[(name, "oappo"), "steps_iqm"] == 32_000 and table.loc[(name, "happo"), "steps_iqm"] == 64_000
     assert layout_study.oappo_vs_happo(df).loc[name].tolist() == [1.0, 1.0, 1.0]

@@ -9,30 +9,13 @@ copies reset at once (auto-reset); nothing is random.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 
 import numpy as np
 
 from .maps import ACTIONS, N_ACTIONS, Maze, load_maze
+from .vec import VecStep
 
 STEP_COST = 0.01
-
-
-@dataclass
-class VecStep:
-    """What one ``reset`` or ``step`` of N copies returns (leading axis: copy)."""
-
-    obs: np.ndarray  # (N, n_agents, obs_dim) float32, after auto-reset
-    state: np.ndarray  # (N, state_dim) float32, after auto-reset
-    avail: np.ndarray  # (N, n_agents, N_ACTIONS) bool; every move is always legal
-    reward: np.ndarray  # (N,) float32 team reward of this step
-    terminated: np.ndarray  # (N,) bool: every agent reached the star
-    truncated: np.ndarray  # (N,) bool: max_steps reached first
-    final_obs: np.ndarray  # like obs, before auto-reset (equals obs where nothing ended)
-    final_state: np.ndarray  # like state, before auto-reset: bootstrap on truncation from here
-    episode_return: np.ndarray  # (N,) float32 undiscounted return of the episode that ended, NaN elsewhere
-    episode_success: np.ndarray  # (N,) float32 1.0 / 0.0 for an ended episode, NaN elsewhere
-    active: np.ndarray  # (N, n_agents) bool: the seat acts on ``obs`` (on the maze always)
 
 
 def as_maze(maze: Maze | str) -> Maze:
@@ -126,10 +109,7 @@ class VecMaze:
         self._reset_all()
         obs = np.broadcast_to(self._start_obs, (self.n_envs, *self._start_obs.shape)).copy()
         state = np.broadcast_to(self._start_state, (self.n_envs, self.state_dim)).copy()
-        no = np.zeros(self.n_envs, dtype=bool)
-        nan = np.full(self.n_envs, np.nan, dtype=np.float32)
-        return VecStep(obs, state, self._avail(), np.zeros(self.n_envs, dtype=np.float32), no, no.copy(),
-                       obs.copy(), state.copy(), nan, nan.copy(), self._active())
+        return VecStep.at_reset(obs, state, self._avail(), self._active())
 
     def _avail(self) -> np.ndarray:
         return np.ones((self.n_envs, self.n_agents, N_ACTIONS), dtype=bool)
@@ -182,8 +162,9 @@ class VecMaze:
         if self.copy:
             obs, state, final_obs, final_state, avail, acting = (
                 x.copy() for x in (obs, state, final_obs, final_state, avail, acting))
-        return VecStep(obs, state, avail, reward.astype(np.float32), terminated, truncated,
-                       final_obs, final_state, episode_return, episode_success, acting)
+        return VecStep(obs=obs, state=state, avail=avail, reward=reward.astype(np.float32), terminated=terminated,
+                       truncated=truncated, final_obs=final_obs, final_state=final_state,
+                       episode_return=episode_return, episode_success=episode_success, active=acting)
 
     def get_state(self) -> dict[str, np.ndarray]:
         """Everything the dynamics carry between steps, as copies (for checkpoints)."""

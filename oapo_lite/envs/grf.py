@@ -24,7 +24,7 @@ import weakref
 
 import numpy as np
 
-from .core import VecStep
+from .vec import VecStep
 
 # scenario -> number of controlled left players (= agents), HARL's choice
 SCENARIOS = {
@@ -220,11 +220,7 @@ class GRFVec:
         """Reset every copy (each engine continues its own seeded sequence of episodes)."""
         obs = np.concatenate(self._call("reset", [()] * len(self._parts)))
         avail, active = self._static()
-        no = np.zeros(self.n_envs, bool)
-        nan = np.full(self.n_envs, np.nan, np.float32)
-        state = obs.reshape(self.n_envs, -1)
-        return VecStep(obs, state, avail, np.zeros(self.n_envs, np.float32), no, no.copy(), obs.copy(),
-                       state.copy(), nan, nan.copy(), active)
+        return VecStep.at_reset(obs, obs.reshape(self.n_envs, -1), avail, active)
 
     def step(self, actions) -> VecStep:
         """``actions`` (n_envs, n_agents) ints in 0..18."""
@@ -237,8 +233,9 @@ class GRFVec:
         parts = self._call("step", [(a[p],) for p in self._parts])
         obs, final_obs, reward, term, trunc, ep_return, ep_success = (np.concatenate(x) for x in zip(*parts))
         avail, active = self._static()
-        return VecStep(obs, obs.reshape(self.n_envs, -1), avail, reward, term, trunc, final_obs,
-                       final_obs.reshape(self.n_envs, -1), ep_return, ep_success, active)
+        return VecStep(obs=obs, state=obs.reshape(self.n_envs, -1), avail=avail, reward=reward, terminated=term,
+                       truncated=trunc, final_obs=final_obs, final_state=final_obs.reshape(self.n_envs, -1),
+                       episode_return=ep_return, episode_success=ep_success, active=active)
 
     def get_state(self) -> list:
         """Every engine's own snapshot and the episode counters (for checkpoints)."""

@@ -19,7 +19,6 @@ import io
 import os
 import sys
 
-import numpy as np
 
 from .pettingzoo_vec import PettingZooVec
 

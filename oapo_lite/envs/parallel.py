@@ -5,7 +5,8 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .core import VecMaze, VecStep, as_maze
+from .core import VecMaze, as_maze
+from .vec import VecStep
 from .maps import Maze
 
 

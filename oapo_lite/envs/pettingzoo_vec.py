@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 from gymnasium import spaces
 
-from .core import VecStep
+from .vec import VecStep
 
 
 def _flat_obs(obs) -> tuple[np.ndarray, np.ndarray | None]:
@@ -117,10 +117,7 @@ class PettingZooVec:
     def reset(self) -> VecStep:
         views = [self._reset_copy(k, self.seed + k) for k in range(self.n_envs)]
         obs, avail, state, active = (np.stack(v) for v in zip(*views))
-        no = np.zeros(self.n_envs, dtype=bool)
-        nan = np.full(self.n_envs, np.nan, dtype=np.float32)
-        return VecStep(obs, state, avail, np.zeros(self.n_envs, np.float32), no, no.copy(), obs.copy(),
-                       state.copy(), nan, nan.copy(), active)
+        return VecStep.at_reset(obs, state, avail, active)
 
     def _env_action(self, k: int, a):
         space = self.spaces[k][1]
@@ -157,8 +154,9 @@ class PettingZooVec:
             out["final_obs"].append(final[0])
             out["final_state"].append(final[2])
         o = {key: np.stack(v) for key, v in out.items()}
-        return VecStep(o["obs"], o["state"], o["avail"], reward, terminated, truncated, o["final_obs"],
-                       o["final_state"], ep_return, ep_success, o["active"])
+        return VecStep(obs=o["obs"], state=o["state"], avail=o["avail"], reward=reward, terminated=terminated,
+                       truncated=truncated, final_obs=o["final_obs"], final_state=o["final_state"],
+                       episode_return=ep_return, episode_success=ep_success, active=o["active"])
 
     def get_state(self) -> dict:
         """Deep copies of the environment copies and the episode counters (for checkpoints)."""

@@ -2,8 +2,7 @@
 
 An engine is a module with ``check(name)`` (raise ``ValueError`` naming the allowed names;
 cheap, without importing the engine itself) and ``make_vec(name, n_envs, seed, max_steps)``
-(a vector env with the ``VecStep`` interface of ``core.VecMaze``; the arrays of a step may be
-overwritten by the next step, the training loop copies what it keeps). Engines are imported only
+(a vector env as ``envs/vec.py`` describes it). Engines are imported only
 when used, so a user without, say, JAX still trains on the mazes. An engine that is optional
 (not in environment.txt) also provides ``install_hint()``: None when it is installed, else how
 to install it.

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import VecStep
+from .vec import VecStep
 
 # SMAX's own scenarios (jaxmarl 0.2.0), and stand-ins registered here: unit types by index
 # (0 marine, 1 marauder, 2 stalker, 3 zealot, 4 zergling, 5 hydralisk), allies then enemies.
@@ -177,10 +177,7 @@ class SmaxVec:
         keys = jax.random.split(jax.random.PRNGKey(self.seed), self.n_envs)
         self._carry, view = self._reset(keys)
         obs, state, avail, active = map(np.array, view)
-        no = np.zeros(self.n_envs, dtype=bool)
-        nan = np.full(self.n_envs, np.nan, dtype=np.float32)
-        return VecStep(obs, state, avail, np.zeros(self.n_envs, np.float32), no, no.copy(), obs.copy(),
-                       state.copy(), nan, nan.copy(), active)
+        return VecStep.at_reset(obs, state, avail, active)
 
     def step(self, actions) -> VecStep:
         """Step every copy by ``actions[env, ally]`` (ints in 0..n_actions-1)."""
