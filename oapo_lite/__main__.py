@@ -1,7 +1,7 @@
 """Command line: ``python -m oapo_lite train ...`` (one run), ``python -m oapo_lite reproduce ...``
 or ``python -m oapo_lite book`` (the notebooks as a static site).
 
-    python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --lam 0.7 --out runs/
+    python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --reuse-lambda 0.7 --out runs/
     python -m oapo_lite train --algo oappo --env smax:3m --n-envs 64 --max-steps 100 --steps 300000
 
 Every ``TrainConfig`` field is a flag; the run goes to ``<out>/<algo>-<env>-s<seed>-<config hash>/``
@@ -33,8 +33,19 @@ def _bool(text: str) -> bool:
     return text.lower() in ("true", "1")
 
 
+class _Renamed(argparse.Action):
+    """A flag whose field was renamed: an error naming the new flag."""
+
+    def __init__(self, option_strings, dest, new: str, **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.new = new
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.error(f"{option_string} was renamed --{self.new.replace('_', '-')}")
+
+
 def train_parser() -> argparse.ArgumentParser:
-    from oapo_lite.config import TrainConfig
+    from oapo_lite.config import RENAMED, TrainConfig
 
     parser = cli.Parser(prog="python -m oapo_lite train", description="Train one run.")
     special = {
@@ -49,6 +60,9 @@ def train_parser() -> argparse.ArgumentParser:
                                    "<engine>:<name> of a real engine, e.g. smax:3m, mamujoco:HalfCheetah-2x3, "
                                    "grf:academy_3_vs_1_with_keeper"),
     }
+    for old, new in RENAMED.items():
+        parser.add_argument(*dict.fromkeys([f"--{old.replace('_', '-')}", f"--{old}"]), action=_Renamed, new=new,
+                            default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     for f in dataclasses.fields(TrainConfig):
         if f.name == "env_fn":
             continue  # a Python callable: use the API

@@ -52,7 +52,7 @@ def _pooled_mean(x: torch.Tensor, active: torch.Tensor | None) -> torch.Tensor:
 
 
 def seac_loss(logp: torch.Tensor, logp_behaviour: torch.Tensor, value: torch.Tensor, returns: torch.Tensor,
-              entropy: torch.Tensor, own: torch.Tensor, lam: float, entropy_coef: float,
+              entropy: torch.Tensor, own: torch.Tensor, seac_lambda: float, entropy_coef: float,
               active: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
     """One learner's SEAC loss (module docstring; Eq. 4 + 0.5 Eq. 5 - entropy).
 
@@ -66,8 +66,8 @@ def seac_loss(logp: torch.Tensor, logp_behaviour: torch.Tensor, value: torch.Ten
     policy_terms, value_terms = -w * logp * adv.detach(), w * adv.pow(2)
     act = (lambda rows: None if active is None else active[rows])
     others = ~own
-    policy = _pooled_mean(policy_terms[own], act(own)) + lam * source_mean(policy_terms[others], act(others)).sum()
-    value_l = _pooled_mean(value_terms[own], act(own)) + lam * source_mean(value_terms[others], act(others)).sum()
+    policy = _pooled_mean(policy_terms[own], act(own)) + seac_lambda * source_mean(policy_terms[others], act(others)).sum()
+    value_l = _pooled_mean(value_terms[own], act(own)) + seac_lambda * source_mean(value_terms[others], act(others)).sum()
     ent = _pooled_mean(entropy[own], act(own))
     loss = policy + VALUE_COEF * value_l - entropy_coef * ent
     return loss, {"policy": policy, "value": value_l, "entropy": ent, "weights": w}
@@ -77,11 +77,11 @@ class A2C:
     """The A2C learner of SEAC and SePS: critics V(o) beside ``actors`` (one per network), one
     Adam per network over actor and critic, and ``learn(batch, next_obs, owner)``.
 
-    ``lam`` is SEAC's lambda (0: each network learns from its own seats only)."""
+    ``seac_lambda`` is SEAC's lambda (0: each network learns from its own seats only)."""
 
-    def __init__(self, actors: Actors, obs_dim: int, hidden: tuple[int, ...], lam: float, gamma: float,
+    def __init__(self, actors: Actors, obs_dim: int, hidden: tuple[int, ...], seac_lambda: float, gamma: float,
                  lr: float, eps: float, max_grad_norm: float, entropy_coef: float, gen: torch.Generator):
-        self.actors, self.lam, self.gamma = actors, lam, gamma
+        self.actors, self.seac_lambda, self.gamma = actors, seac_lambda, gamma
         self.max_grad_norm, self.entropy_coef = max_grad_norm, entropy_coef
         self.critics = nn.ModuleList(Critic(obs_dim, hidden, gen) for _ in range(actors.n_nets))
         self.opts = [torch.optim.Adam(self.params(k), lr=lr, eps=eps, foreach=True) for k in range(actors.n_nets)]
@@ -116,7 +116,7 @@ class A2C:
         for row, net in enumerate(nets):
             own = torch.tensor([c == net for c in owner])
             loss, p = seac_loss(head.log_prob(d[row], batch.act), batch.logp, v[row], returns,
-                                head.entropy(d[row]), own, self.lam, self.entropy_coef, batch.active)
+                                head.entropy(d[row]), own, self.seac_lambda, self.entropy_coef, batch.active)
             check_finite(loss, "the SEAC / A2C loss", net)
             total, parts = total + loss, parts + [p]
         for opt in self.opts:
@@ -129,7 +129,7 @@ class A2C:
         others = torch.cat([w.reshape(-1) for w in others])
         mean = (lambda key: float(sum(p[key].detach() for p in parts) / k))
         return {"policy_loss": mean("policy"), "value_loss": mean("value"), "entropy": mean("entropy"),
-                "seac_weight": float(others.mean()) if self.lam > 0 and others.numel() else float("nan")}
+                "seac_weight": float(others.mean()) if self.seac_lambda > 0 and others.numel() else float("nan")}
 
     def copy_net(self, src: int, dst: int) -> None:
         """Network ``dst`` becomes a copy of ``src``: actor, critic and Adam state."""

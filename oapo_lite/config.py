@@ -45,6 +45,10 @@ def _is_real(x) -> bool:
     return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
 
 
+# fields renamed since runs were first recorded (old name -> new): the command line names the new one
+RENAMED = {"lam": "reuse_lambda"}
+
+
 @dataclass
 class TrainConfig:
     """Everything that determines a run (with the seed). Defaults follow HARL (ANCHORS.md),
@@ -71,7 +75,7 @@ class TrainConfig:
     max_grad_norm: float = 10.0
     hidden: tuple[int, ...] = (64, 64)
     sigma: float = 0.1  # Eq. 9's KL threshold
-    lam: float = 0.7  # Eq. 9's own-experience probability
+    reuse_lambda: float = 0.7  # Eq. 9's lambda: the probability a learner keeps for its own experience
     kl_reduce: str = "max"
     reuse_mode: str = "weights"
     allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
@@ -128,7 +132,7 @@ class TrainConfig:
         need(self.steps >= self.n_envs * self.rollout_steps, "steps",
              f">= n_envs * rollout_len = {self.n_envs * self.rollout_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
-        for name in ("gamma", "gae_lambda", "lam"):
+        for name in ("gamma", "gae_lambda", "reuse_lambda"):
             real(name, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]")
         for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold", "a2c_lr", "a2c_adam_eps",
                      "a2c_max_grad_norm"):

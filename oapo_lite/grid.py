@@ -163,14 +163,14 @@ GRID = (
     Figure("fig3c", tuple((s, dict(algo="oappo", sigma=s)) for s in SIGMAS), common=dict(env="black_red"),
            claims=tuple((better, (TrainConfig.sigma, s), f"sigma = {TrainConfig.sigma:g} beats sigma = {s:g} ({why})")
                         for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS))),
-    Figure("fig3d", tuple((lam, dict(algo="oappo", lam=lam)) for lam in LAMBDAS), common=dict(env="black_red"),
+    Figure("fig3d", tuple((lam, dict(algo="oappo", reuse_lambda=lam)) for lam in LAMBDAS), common=dict(env="black_red"),
            claims=((better, (LAM_07, LAM_04), f"lambda = {LAM_07:g} is marginally better than lambda = {LAM_04:g}"),
                    (better, (LAM_04, LAM_1), f"lambda = {LAM_04:g} beats lambda = {LAM_1:g} (own experience only)"),
                    (better, (LAM_04, LAM_02), f"lambda = {LAM_04:g} beats lambda = {LAM_02:g} (mostly others' "
                                               "experience)"))),
     # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that the mask
     # alone decides, as in the paper's "modified OAPPO parameters".
-    Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), lam=SCHEME_LAM[s]))
+    Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), reuse_lambda=SCHEME_LAM[s]))
                           for s in SCHEMES), common=dict(env="black_blue_red"), claims=(
                (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
                (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
@@ -183,7 +183,7 @@ GRID = (
     # Fig. 3c-d's grid) and no reuse, on both paper mazes; and both at lambda 0.4 on Black-Red,
     # where the fixed rule is trapped (Fig. 3d)
     Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)
-           + tuple((f"{label} lambda=0.4", dict(env="black_red", lam=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2])),
+           + tuple((f"{label} lambda=0.4", dict(env="black_red", reuse_lambda=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2])),
     # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
     # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
     # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).

@@ -19,7 +19,7 @@ LAMBDAS = grid.LAMBDAS
 ADAPTIVE = grid.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
 # curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
 CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
-    f"oappo lambda={lam:g}": dict(algo="oappo", lam=lam) for lam in LAMBDAS if lam != TrainConfig.lam} | {
+    f"oappo lambda={lam:g}": dict(algo="oappo", reuse_lambda=lam) for lam in LAMBDAS if lam != TrainConfig.reuse_lambda} | {
     ADAPTIVE: dict(grid.ADAPTIVE_CURVES[0][1])}
 
 
@@ -55,7 +55,7 @@ def load(budget: str, layouts=None) -> pd.DataFrame:
     return df
 
 
-RUN_FIELDS = ["algo", "env", "sigma", "lam", "reuse_adapt", "steps", "git_rev"]  # what identifies a run
+RUN_FIELDS = ["algo", "env", "sigma", "reuse_lambda", "reuse_adapt", "steps", "git_rev"]  # what identifies a run
 
 
 def per_run(df: pd.DataFrame) -> pd.DataFrame:

@@ -14,7 +14,7 @@ import torch
 
 
 def gae(reward: torch.Tensor, value: torch.Tensor, next_value: torch.Tensor, done: torch.Tensor,
-        gamma: float, lam: float) -> torch.Tensor:
+        gamma: float, gae_lambda: float) -> torch.Tensor:
     """Generalised advantage estimation of the joint advantage A(s, a) (Algorithm 1 line 4).
 
     All (T, N). ``next_value`` is the value of the step's successor: V(s_{t+1}) if the episode
@@ -24,7 +24,7 @@ def gae(reward: torch.Tensor, value: torch.Tensor, next_value: torch.Tensor, don
     adv = torch.zeros_like(reward)
     running = torch.zeros_like(reward[0])
     for t in reversed(range(reward.shape[0])):
-        running = delta[t] + gamma * lam * torch.where(done[t], 0.0, running)
+        running = delta[t] + gamma * gae_lambda * torch.where(done[t], 0.0, running)
         adv[t] = running
     return adv
 

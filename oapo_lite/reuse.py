@@ -33,11 +33,11 @@ def peer_share(m) -> float:
     return float(m[~np.eye(len(m), dtype=bool)].sum() / len(m))
 
 
-def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | None = None) -> np.ndarray:
+def oapo_matrix(kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.ndarray | None = None) -> np.ndarray:
     """Eq. 9: the reuse distribution of every learner, one row each.
 
     ``kl[i, j]`` is D_KL^max(pi_j, pi_i), the distance from source j to learner i. Learner
-    i keeps ``lam`` for itself and spreads ``1 - lam`` evenly over the other sources with
+    i keeps ``reuse_lambda`` for itself and spreads ``1 - reuse_lambda`` evenly over the other sources with
     ``kl[i, j] <= sigma`` that ``allowed`` (a fixed boolean mask) permits; if it has no such
     source, it keeps everything (M[i, i] = 1). Rows sum to 1.
     """
@@ -48,8 +48,8 @@ def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | 
         raise ValueError("kl must hold non-negative numbers (KL divergences)")
     if not sigma >= 0:
         raise ValueError(f"sigma must be >= 0 (a KL threshold), got {sigma!r}")
-    if not 0.0 <= lam <= 1.0:
-        raise ValueError(f"lambda must lie in [0, 1], got {lam!r}")
+    if not 0.0 <= reuse_lambda <= 1.0:
+        raise ValueError(f"reuse_lambda must lie in [0, 1], got {reuse_lambda!r}")
     n = kl.shape[0]
     ok = kl <= sigma
     if allowed is not None:
@@ -59,19 +59,19 @@ def oapo_matrix(kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | 
         ok &= allowed
     np.fill_diagonal(ok, False)
     others = ok.sum(1, keepdims=True)  # gamma_i - 1 in the paper's notation
-    m = np.where(ok, (1.0 - lam) / np.maximum(others, 1), 0.0)
-    m[np.arange(n), np.arange(n)] = np.where(others[:, 0] > 0, lam, 1.0)
+    m = np.where(ok, (1.0 - reuse_lambda) / np.maximum(others, 1), 0.0)
+    m[np.arange(n), np.arange(n)] = np.where(others[:, 0] > 0, reuse_lambda, 1.0)
     return m
 
 
 REUSE_KINDS = ("oapo", "own", "uniform")
 
 
-def matrix_for(kind: str, kl: np.ndarray, sigma: float, lam: float, allowed: np.ndarray | None = None) -> np.ndarray:
+def matrix_for(kind: str, kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.ndarray | None = None) -> np.ndarray:
     """The reuse matrix of an algorithm family (Fig. 2): "oapo" Eq. 9 from ``kl``, "own" HAPPO's
-    identity, "uniform" MAPPO's 1/n (the last two ignore ``kl``, ``sigma``, ``lam``, ``allowed``)."""
+    identity, "uniform" MAPPO's 1/n (the last two ignore ``kl``, ``sigma``, ``reuse_lambda``, ``allowed``)."""
     if kind == "oapo":
-        return oapo_matrix(kl, sigma, lam, allowed)
+        return oapo_matrix(kl, sigma, reuse_lambda, allowed)
     if kind == "own":
         return happo_matrix(len(kl))
     if kind == "uniform":

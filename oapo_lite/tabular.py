@@ -42,7 +42,7 @@ class TabularConfig:
     kl_threshold: float = 0.01  # TRPO: delta of Eq. 7
     backtrack: float = 0.5  # TRPO: line-search shrink factor (up to 10 tries)
     sigma: float = 0.1  # Eq. 9: KL gate for reuse
-    lam: float = 0.7  # Eq. 9: weight a learner keeps on its own experience
+    reuse_lambda: float = 0.7  # Eq. 9's lambda: weight a learner keeps on its own experience
     reuse: str = "weights"  # "weights": M as weights; "sample": one source per learner (Alg. 1 line 5)
     estimate: str = "exact"  # "exact" expectations or "samples"
     n_episodes: int = 64  # samples: episodes per iteration
@@ -65,8 +65,8 @@ class TabularConfig:
             raise ValueError(f"backtrack must lie in (0, 1), got {self.backtrack}")
         if not self.sigma >= 0:
             raise ValueError(f"sigma must be >= 0 (a KL threshold), got {self.sigma!r}")
-        if not 0 <= self.lam <= 1:
-            raise ValueError(f"lambda must lie in [0, 1], got {self.lam!r}")
+        if not 0 <= self.reuse_lambda <= 1:
+            raise ValueError(f"reuse_lambda must lie in [0, 1], got {self.reuse_lambda!r}")
 
 
 @dataclass(frozen=True)
@@ -254,7 +254,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
         std = np.sqrt(batch.weight @ (batch.adv - mean) ** 2 / batch.weight.sum())
         adv = (batch.adv - mean) / (std + 1e-8)
         kl = kl_between_agents(old, eta)
-        m = reuse.matrix_for(config.ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.lam)
+        m = reuse.matrix_for(config.ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.reuse_lambda)
         mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse == "sample" else None
         rows = np.eye(n)[mapping] if mapping is not None else m
         order = np.zeros(1, dtype=np.int64) if shared else reuse.update_order(n, rng_order)

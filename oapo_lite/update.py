@@ -44,7 +44,7 @@ class Sources:
         w = W[net][rows]
         # Eq. 7 weights the KL by M, which bounds the acting policy's own-seat KL by
         # delta / W[i, i]: nothing when W[i, i] = 0 ("sample" mode drew another source, or
-        # lam = 0), and then the policy that acts could move without limit. An own seat with
+        # reuse_lambda = 0), and then the policy that acts could move without limit. An own seat with
         # weight 0 therefore enters the trust region with weight 1 (its KL <= delta); where the
         # paper's weight is positive it is kept, so the weights mode is Eq. 7 as written.
         kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
@@ -262,7 +262,7 @@ class Learner:
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
         K = policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
-        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.lam, self.allowed)
+        M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.reuse_lambda, self.allowed)
         if cfg.reuse_adapt is not None:
             G = source_gradients(actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip,
                                  adaptive.folds(cfg.reuse_adapt))

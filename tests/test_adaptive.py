@@ -29,7 +29,7 @@ def test_three_agents_by_hand():
     ], dtype=float)
     c = adaptive.cosine_agreement(g)
     assert np.allclose(c, [[1, 0.6, -1], [-1, 1, 1], [0, 0, 0]])
-    m = reuse.oapo_matrix(np.zeros((3, 3)), sigma=0.1, lam=0.7)  # everyone admissible: 0.7 / 0.15 / 0.15
+    m = reuse.oapo_matrix(np.zeros((3, 3)), sigma=0.1, reuse_lambda=0.7)  # everyone admissible: 0.7 / 0.15 / 0.15
     expected = np.array([
         [1 - 0.15 * 0.6, 0.15 * 0.6, 0.0],  # 0.91, 0.09, 0
         [0.0, 0.85, 0.15],
@@ -81,7 +81,7 @@ def _random(n, seed):
     rng = np.random.default_rng(seed)
     kl = rng.exponential(0.2, size=(n, n))
     np.fill_diagonal(kl, 0.0)
-    return reuse.oapo_matrix(kl, sigma=0.3, lam=rng.uniform(0.1, 1.0)), rng.normal(size=(n, n, 7))
+    return reuse.oapo_matrix(kl, sigma=0.3, reuse_lambda=rng.uniform(0.1, 1.0)), rng.normal(size=(n, n, 7))
 
 
 RULES = adaptive.ADAPT_RULES
@@ -109,7 +109,7 @@ def test_rows_are_distributions_that_never_reuse_more_than_eq9(n, seed, rule):
 @pytest.mark.parametrize("rule", COSINE_RULES)
 def test_full_agreement_is_eq9_and_full_disagreement_is_happo(rule):
     kl = np.array([[0.0, 0.05, 0.5], [0.05, 0.0, 0.02], [0.3, 0.02, 0.0]])
-    m = reuse.oapo_matrix(kl, sigma=0.1, lam=0.6)
+    m = reuse.oapo_matrix(kl, sigma=0.1, reuse_lambda=0.6)
     assert np.array_equal(adaptive.agreement_matrix(m, np.ones((3, 3)), rule), m)
     disagree = -np.ones((3, 3))
     np.fill_diagonal(disagree, 1.0)

@@ -51,6 +51,7 @@ def _cli_error(capsys, *argv) -> str:
     (["--steps", "200.0"], ["--steps", "200.0"]),
     (["--n-envs", "0"], ["n_envs = 0", "integer >= 1"]),
     (["--algo", "ppo"], ["ppo", "oappo"]),
+    (["--lam", "0.4"], ["--lam was renamed --reuse-lambda"]),
 ])
 def test_a_bad_training_option_is_one_line_naming_it(tmp_path, capsys, argv, words):
     err = _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path), *argv)
@@ -283,7 +284,7 @@ def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
     (dict(hidden=64), ["hidden = 64", "sequence"]),
     (dict(steps="abc"), ["steps = 'abc'", "an integer"]),
     (dict(steps=None), ["steps = None", "an integer"]),
-    (dict(lam=None), ["lam = None", "[0, 1]"]),
+    (dict(reuse_lambda=None), ["reuse_lambda = None", "[0, 1]"]),
     (dict(sigma="0.1"), ["sigma = '0.1'", ">= 0"]),
     (dict(lr=float("nan")), ["lr = nan", "finite"]),
     (dict(seed=True), ["seed = True", "integer >= 0"]),
@@ -303,7 +304,7 @@ def test_a_config_value_of_the_wrong_type_is_named(bad, words):
 
 
 def test_numpy_scalars_are_valid_config_values():
-    cfg = TrainConfig(steps=np.int64(3200), seed=np.int32(1), lam=np.float64(0.5), hidden=(np.int64(32),))
+    cfg = TrainConfig(steps=np.int64(3200), seed=np.int32(1), reuse_lambda=np.float64(0.5), hidden=(np.int64(32),))
     assert cfg.hidden == (32,) and cfg.n_iterations == 2
 
 

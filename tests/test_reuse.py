@@ -28,7 +28,7 @@ def test_eq9_entries_by_hand():
     kl = np.array(
         [[0.0, 0.05, 0.1, 0.5], [0.05, 0.0, 0.3, 0.3], [0.1, 0.3, 0.0, 0.9], [0.5, 0.3, 0.9, 0.0]]
     )
-    m = reuse.oapo_matrix(kl, sigma=0.1, lam=0.7)
+    m = reuse.oapo_matrix(kl, sigma=0.1, reuse_lambda=0.7)
     expected = np.array(
         [[0.7, 0.15, 0.15, 0.0], [0.3, 0.7, 0.0, 0.0], [0.3, 0.0, 0.7, 0.0], [0.0, 0.0, 0.0, 1.0]]
     )
@@ -39,7 +39,7 @@ def test_eq9_entries_by_hand():
 def test_zeros_exactly_where_gated(seed):
     kl = random_kl(5, seed)
     allowed = np.random.default_rng(seed + 100).random((5, 5)) < 0.6
-    m = reuse.oapo_matrix(kl, sigma=0.2, lam=0.6, allowed=allowed)
+    m = reuse.oapo_matrix(kl, sigma=0.2, reuse_lambda=0.6, allowed=allowed)
     off = ~np.eye(5, dtype=bool)
     assert (m[off & ((kl > 0.2) | ~allowed)] == 0).all()
     assert (m[off & (kl <= 0.2) & allowed] > 0).all()
@@ -63,11 +63,11 @@ def test_infinite_sigma_and_lambda_one_over_n_is_mappo():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(sigma=-0.1, lam=0.5), "sigma"),
-        (dict(sigma=float("nan"), lam=0.5), "sigma"),
-        (dict(sigma=0.1, lam=1.5), "lambda"),
-        (dict(sigma=0.1, lam=-0.01), "lambda"),
-        (dict(sigma=0.1, lam=0.5, allowed=np.ones((2, 2), bool)), "allowed"),
+        (dict(sigma=-0.1, reuse_lambda=0.5), "sigma"),
+        (dict(sigma=float("nan"), reuse_lambda=0.5), "sigma"),
+        (dict(sigma=0.1, reuse_lambda=1.5), "lambda"),
+        (dict(sigma=0.1, reuse_lambda=-0.01), "lambda"),
+        (dict(sigma=0.1, reuse_lambda=0.5, allowed=np.ones((2, 2), bool)), "allowed"),
     ],
 )
 def test_bad_arguments_raise(kwargs, match):
@@ -143,5 +143,5 @@ def test_matrix_for_dispatches_and_rejects_unknown_kinds():
 def test_peer_share_of_the_three_rules(n):
     assert reuse.peer_share(reuse.happo_matrix(n)) == 0.0
     assert np.isclose(reuse.peer_share(reuse.mappo_matrix(n)), (n - 1) / n)
-    close = reuse.oapo_matrix(np.zeros((n, n)), sigma=0.1, lam=0.7)  # every peer within sigma
+    close = reuse.oapo_matrix(np.zeros((n, n)), sigma=0.1, reuse_lambda=0.7)  # every peer within sigma
     assert np.isclose(reuse.peer_share(close), 0.0 if n == 1 else 0.3)

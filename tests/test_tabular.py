@@ -89,10 +89,10 @@ def test_trust_region_steps_respect_the_kl_threshold(maze_game):
 
 
 def test_exact_reuse_matrix_follows_eq9_kl(maze_game):
-    r = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=1, sigma=10.0, lam=0.6))[0]
+    r = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=1, sigma=10.0, reuse_lambda=0.6))[0]
     np.testing.assert_allclose(r.M, [[0.6, 0.4], [0.4, 0.6]])
     assert (np.diag(r.kl) == 0).all() and (r.kl[~np.eye(2, dtype=bool)] > 0).all()
-    gated = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=1, sigma=r.kl.max() / 2, lam=0.6))[0]
+    gated = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=1, sigma=r.kl.max() / 2, reuse_lambda=0.6))[0]
     assert gated.M[r.kl > r.kl.max() / 2].sum() == 0
 
 
@@ -142,7 +142,7 @@ def test_config_rejects_bad_values():
         TabularConfig(clip=0.0)
 
 
-@pytest.mark.parametrize("kwargs, match", [(dict(sigma=-1.0), "sigma"), (dict(lam=3.0), "lambda")])
+@pytest.mark.parametrize("kwargs, match", [(dict(sigma=-1.0), "sigma"), (dict(reuse_lambda=3.0), "lambda")])
 def test_bad_sigma_lambda_raise(kwargs, match):
     with pytest.raises(ValueError, match=match):
         TabularConfig(algo="oappo", **kwargs)

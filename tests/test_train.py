@@ -58,7 +58,7 @@ def _assert_same_run(tmp_path, a: str, rows_a: pd.DataFrame, b: str, rows_b: pd.
     (dict(algo="ppo"), ["ppo", "oappo", "mappo"]),
     (dict(env="no_such_map"), ["no_such_map", "black_red"]),
     (dict(sigma=-0.1), ["sigma", "-0.1", ">= 0"]),
-    (dict(lam=1.5), ["lam", "1.5", "[0, 1]"]),
+    (dict(reuse_lambda=1.5), ["reuse_lambda", "1.5", "[0, 1]"]),
     (dict(kl_reduce="median"), ["median", "max", "mean"]),
     (dict(reuse_mode="all"), ["all", "weights", "sample"]),
     (dict(allowed="XR"), ["XR", "NR", "UR", "RR", "AR"]),
@@ -110,7 +110,7 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path, algo):
     assert load_checkpoint(tmp_path / "resumed")["iteration"] == 4
     _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
     with pytest.raises(ValueError, match="different config"):
-        train(TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, **{**TINY, "lam": 0.5}),
+        train(TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, **{**TINY, "reuse_lambda": 0.5}),
               tmp_path / "full", progress=False)
 
 
@@ -148,7 +148,7 @@ def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
     """Eq. 9 with sigma = 0 (no other policy is that close) or lambda = 1 gives M = I."""
     _run(tmp_path, "happo", algo="happo", **SMALL_BR)
     _run(tmp_path, "sigma0", algo="oappo", sigma=0.0, **SMALL_BR)
-    _run(tmp_path, "lam1", algo="oappo", lam=1.0, **SMALL_BR)
+    _run(tmp_path, "lam1", algo="oappo", reuse_lambda=1.0, **SMALL_BR)
     _run(tmp_path, "reuse", algo="oappo", **SMALL_BR)
     happo = _params(tmp_path, "happo")
     assert _same(happo, _params(tmp_path, "sigma0"))
@@ -160,7 +160,7 @@ def test_oappo_with_one_shared_network_and_uniform_reuse_is_bitwise_mappo(tmp_pa
     """A shared net is at KL 0 from itself, so Eq. 9 spreads each seat's row evenly: the
     mean over seats is 1/n for every source, MAPPO's matrix."""
     _run(tmp_path, "mappo", algo="mappo", **SMALL_BR)
-    rows = _run(tmp_path, "oappo", algo="oappo", shared=True, lam=0.5, **SMALL_BR)
+    rows = _run(tmp_path, "oappo", algo="oappo", shared=True, reuse_lambda=0.5, **SMALL_BR)
     assert _same(_params(tmp_path, "mappo"), _params(tmp_path, "oappo"))
     assert np.array_equal(rows["reuse_matrix"].iloc[-1], [[0.5, 0.5], [0.5, 0.5]])
     on_disk = pd.read_csv(tmp_path / "oappo" / "results.csv")["reuse_matrix"].iloc[-1]
@@ -181,7 +181,7 @@ def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, mo
         return real(actors, opts, batch, W, *args)
 
     monkeypatch.setattr(train_module, "update_actors", spy)
-    rows = _run(tmp_path, "sample", algo="oappo", reuse_mode="sample", sigma=10.0, lam=0.2,
+    rows = _run(tmp_path, "sample", algo="oappo", reuse_mode="sample", sigma=10.0, reuse_lambda=0.2,
                 **{**SMALL_BR, "steps": 2000})
     history = rows.attrs["history"]
     drawn = np.array([W.argmax(1) for W in seen])
@@ -189,7 +189,7 @@ def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, mo
         M = h["reuse_matrix"]
         assert ((W == 0) | (W == 1)).all() and (W.sum(1) == 1).all()
         assert (M[np.arange(2), W.argmax(1)] > 0).all()
-    assert (drawn != np.arange(2)).any()  # with lam = 0.2 the other seat is drawn sometimes
+    assert (drawn != np.arange(2)).any()  # with reuse_lambda = 0.2 the other seat is drawn sometimes
 
 
 @pytest.mark.parametrize("algo", ["oappo", "oatrpo"])
