@@ -100,7 +100,7 @@ def trapped(df: pd.DataFrame) -> pd.DataFrame:
     """Per layout (rows) and curve (columns): the seeds whose final level stayed below 95% of
     the optimum."""
     runs = per_run(df)
-    return (runs["final_frac"] < verdicts.THRESHOLD).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
+    return (runs["final"] < verdicts.THRESHOLD).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
 
 
 def fixed_curves() -> list[str]:

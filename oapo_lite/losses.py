@@ -90,12 +90,12 @@ class Diverged(FloatingPointError):
     """A loss, advantage, factor or KL that is NaN or infinite: the run stops (the last
     checkpoint is written only after a whole finite iteration, so it stays the last good one)."""
 
-    def __init__(self, quantity: str, learner: int | str, where: str = "", then: str = ""):
-        super().__init__(f"{where}{quantity} is not finite (learner {learner}){then}")
-        self.quantity, self.learner = quantity, learner
+    def __init__(self, quantity: str, net: int | str, where: str = "", then: str = ""):
+        super().__init__(f"{where}{quantity} is not finite (learner {net}){then}")
+        self.quantity, self.net = quantity, net  # the net being updated (or who, when none is)
 
 
-def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, learner: int | str) -> None:
-    """Raise ``Diverged`` naming the quantity and the learner if ``x`` holds a NaN or an inf."""
+def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, net: int | str) -> None:
+    """Raise ``Diverged`` naming the quantity and the net being updated if ``x`` holds a NaN or an inf."""
     if not torch.isfinite(torch.as_tensor(x)).all():
-        raise Diverged(quantity, learner)
+        raise Diverged(quantity, net)

@@ -31,7 +31,7 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     """Fig. 5b: final fraction of the optimum per label, bars with the std over seeds."""
     ax = ax or plt.subplots(figsize=(5, 4))[1]
     order = order if order is not None else list(dict.fromkeys(runs["label"]))
-    g = runs.groupby("label")["final_frac"]
+    g = runs.groupby("label")["final"]
     mean, std = g.mean().reindex(order), g.std(ddof=0).reindex(order).fillna(0.0)
     ax.bar([str(o) for o in order], mean, yerr=std, capsize=4, color="tab:blue", alpha=0.8)
     ax.axhline(1.0, color="grey", ls="--", lw=1)

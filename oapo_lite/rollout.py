@@ -1,5 +1,5 @@
 """Rollouts: every seat's policy acting in a vector of env copies, for training (``collect``) and
-for evaluation (``evaluate``), and the batch they produce (``Rollout``)."""
+for evaluation (``episode_scores``), and the batch they produce (``Rollout``)."""
 from __future__ import annotations
 
 import math
@@ -108,7 +108,7 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
 
 
 
-def evaluate(actors: Actors, owner: list[int], env, gen: torch.Generator, max_steps: int) -> tuple[float, float]:
+def episode_scores(actors: Actors, owner: list[int], env, gen: torch.Generator, max_steps: int) -> tuple[float, float]:
     """Mean return and success rate of the first episode of every copy, stochastic policies."""
     step = env.reset()
     ret, success = np.full(env.n_envs, np.nan), np.full(env.n_envs, np.nan)

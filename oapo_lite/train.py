@@ -23,7 +23,7 @@ import torch
 
 from oapo_lite.config import TrainConfig
 from oapo_lite.losses import Diverged
-from oapo_lite.rollout import collect, evaluate
+from oapo_lite.rollout import collect, episode_scores
 from oapo_lite.runstate import RunState, derive_seed, git_revision, load_checkpoint, save_results
 from oapo_lite.store import Lock
 
@@ -78,7 +78,7 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
     nothing from the run's own randomness and a resumed run evaluates alike."""
     cfg, it = state.cfg, state.iteration
     gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 3, it))
-    ret, success = evaluate(state.actors, state.owner, state.eval_env, gen, cfg.max_steps)
+    ret, success = episode_scores(state.actors, state.owner, state.eval_env, gen, cfg.max_steps)
     return {**cfg.flat(), "git_rev": revision, "iteration": it, "step": it * cfg.n_envs * cfg.rollout_steps,
             "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics}
 
@@ -121,11 +121,11 @@ def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback) 
 
 def _diverged_at(err: Diverged, state: RunState, out: Path) -> Diverged:
     """``err`` told with the iteration, the seats of the learner (a net index) and the checkpoint."""
-    learner, owner, agents = err.learner, state.owner, state.env.agents
-    if isinstance(learner, (int, np.integer)):
-        learner = f"{learner} (seats {[agents[k] for k in range(len(owner)) if owner[k] == learner]})"
+    net, owner, agents = err.net, state.owner, state.env.agents
+    if isinstance(net, (int, np.integer)):
+        net = f"{net} (seats {[agents[k] for k in range(len(owner)) if owner[k] == net]})"
     path = out / "checkpoint.pt"
     last = (f"the last good checkpoint {path} (iteration {load_checkpoint(out)['iteration']}) is left as it was"
             if path.exists() else "no checkpoint had been written yet")
-    return Diverged(err.quantity, learner, f"iteration {state.iteration + 1} of {state.cfg.algo} seed {state.cfg.seed}: ",
+    return Diverged(err.quantity, net, f"iteration {state.iteration + 1} of {state.cfg.algo} seed {state.cfg.seed}: ",
                     f"; the run stopped and {last}")

@@ -50,7 +50,7 @@ CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
 SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
 # per-run numbers a verdict reads; "steps" and "drawdown" are better when lower
-METRICS = {"steps": "steps_to_threshold", "final": "final_frac", "drawdown": "drawdown"}
+RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawdown"}
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ SCORE = Metric("eval_success", 0.9, 0.05, "a {:.0%} score", "final score (share 
 
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
     """One row per run: steps to threshold (censored), whether it got there, final value of
-    ``y`` (column ``final_frac``), its peak, and its largest drop below an earlier peak."""
+    ``y`` (column ``final``: a fraction of the optimum, a win rate or a return, as ``y`` is), its peak, and its largest drop below an earlier peak."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
@@ -85,7 +85,7 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
-            "final_frac": float(run[y].iloc[-k:].mean()),
+            "final": float(run[y].iloc[-k:].mean()),
             "peak": float(run[y].max()),
             "drawdown": float((run[y].cummax() - run[y]).max()),
         })
@@ -99,8 +99,8 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
         "reached": g["reached"].sum().astype(int),
         "steps_mean": g["steps_to_threshold"].mean(),
         "steps_std": g["steps_to_threshold"].std(ddof=1).fillna(0.0),
-        "final_mean": g["final_frac"].mean(),
-        "final_std": g["final_frac"].std(ddof=1).fillna(0.0),
+        "final_mean": g["final"].mean(),
+        "final_std": g["final"].std(ddof=1).fillna(0.0),
     })
 
 
@@ -170,24 +170,24 @@ class Evidence:
         self.runs = per_run(df, self.threshold, y=metric.column)
         self.summary = _summary_of(self.runs)
 
-    def values(self, label, metric: str) -> np.ndarray:
-        """Per-seed values of ``metric`` (a key of ``METRICS``) for one curve."""
-        if metric not in METRICS:
-            raise ValueError(f"unknown metric {metric!r}; choose from {sorted(METRICS)}")
+    def values(self, label, stat: str) -> np.ndarray:
+        """Per-seed values of the per-run statistic ``stat`` (a key of ``RUN_STATS``) for one curve."""
+        if stat not in RUN_STATS:
+            raise ValueError(f"unknown run statistic {stat!r}; choose from {sorted(RUN_STATS)}")
         if label not in self.summary.index:
             raise ValueError(f"no runs labelled {label!r}; labels are {list(self.summary.index)}")
-        return self.runs.loc[self.runs["label"] == label, METRICS[metric]].to_numpy(float)
+        return self.runs.loc[self.runs["label"] == label, RUN_STATS[stat]].to_numpy(float)
 
-    def level(self, label, metric: str) -> Interval:
-        """IQM over seeds of ``metric`` with its 95% interval."""
-        return bootstrap_interval(iqm, self.values(label, metric))
+    def level(self, label, stat: str) -> Interval:
+        """IQM over seeds of ``stat`` with its 95% interval."""
+        return bootstrap_interval(iqm, self.values(label, stat))
 
-    def improvement(self, a, b, metric: str) -> Interval:
-        """P(a better than b) on ``metric`` with its 95% interval; fewer steps or a smaller
+    def improvement(self, a, b, stat: str) -> Interval:
+        """P(a better than b) on ``stat`` with its 95% interval; fewer steps or a smaller
         drawdown is better."""
-        sign = -1.0 if metric in ("steps", "drawdown") else 1.0
-        return bootstrap_interval(probability_of_improvement, sign * self.values(a, metric),
-                                  sign * self.values(b, metric))
+        sign = -1.0 if stat in ("steps", "drawdown") else 1.0
+        return bootstrap_interval(probability_of_improvement, sign * self.values(a, stat),
+                                  sign * self.values(b, stat))
 
 
 def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT) -> pd.DataFrame:
@@ -196,9 +196,9 @@ def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric =
     rows = {}
     for label in ev.summary.index:
         row = {"seeds": ev.summary.loc[label, "seeds"], "reached": ev.summary.loc[label, "reached"]}
-        for metric in ("steps", "final"):
-            est = ev.level(label, metric)
-            row |= {f"{metric}_iqm": est.point, f"{metric}_low": est.low, f"{metric}_high": est.high}
+        for stat in ("steps", "final"):
+            est = ev.level(label, stat)
+            row |= {f"{stat}_iqm": est.point, f"{stat}_low": est.low, f"{stat}_high": est.high}
         rows[label] = row
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("label")
 
@@ -245,10 +245,10 @@ def _above(est: Interval, value: float) -> str:
     return DIRECTION if est.point > value else NOT
 
 
-def _pairwise(ev: Evidence, a, b, metric: str, claim: str, se_diff: float, se_noise: float,
+def _pairwise(ev: Evidence, a, b, stat: str, claim: str, se_diff: float, se_noise: float,
               evidence: str, veto: bool = False) -> Verdict:
-    p = ev.improvement(a, b, metric)
-    word = {"steps": "faster", "final": "higher", "drawdown": "steadier"}[metric]
+    p = ev.improvement(a, b, stat)
+    word = {"steps": "faster", "final": "higher", "drawdown": "steadier"}[stat]
     return Verdict(claim, NOT if veto else _above(p, 0.5), NOT if veto else _se_status(se_diff, se_noise),
                    f"{evidence}; P({a} {word}) = {p.fmt()}.", f"P({a} {word}) {p.fmt()}")
 

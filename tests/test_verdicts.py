@@ -86,11 +86,11 @@ def test_one_run_has_no_interval():
     assert "no interval" in est.fmt()
 
 
-def test_bad_confidence_metric_and_label_raise():
+def test_bad_confidence_statistic_and_label_raise():
     with pytest.raises(ValueError, match="confidence must lie in"):
         v.bootstrap_interval(v.iqm, [1.0, 2.0], confidence=95)
     ev = evidence({"a": (10_000, 1.0)})
-    with pytest.raises(ValueError, match="unknown metric 'reward'"):
+    with pytest.raises(ValueError, match="unknown run statistic 'reward'.*final"):
         ev.values("a", "reward")
     with pytest.raises(ValueError, match="no runs labelled 'b'"):
         ev.values("b", "final")
@@ -104,7 +104,7 @@ def test_per_run_steps_and_censoring():
     assert runs.loc["a", "steps_to_threshold"] == 40_000  # first grid point with 40k/40k >= 0.95
     assert runs.loc["a", "reached"] and not runs.loc["b", "reached"]
     assert runs.loc["b", "steps_to_threshold"] == 100_000  # censored at the last step
-    assert runs.loc["b", "final_frac"] == pytest.approx(0.5)
+    assert runs.loc["b", "final"] == pytest.approx(0.5)
 
 
 def test_intervals_table_matches_per_run_values():
