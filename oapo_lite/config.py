@@ -51,7 +51,7 @@ RENAMED = {"lam": "reuse_lambda"}
 
 @dataclass
 class TrainConfig:
-    """Everything that determines a run (with the seed). Defaults follow HARL (ANCHORS.md),
+    """Everything that determines a run (with the seed). Defaults follow HARL (PKU-MARL/HARL),
     except the smaller (64, 64) hidden layers and the batch shape (32 copies x 50 steps)."""
 
     algo: str = "oappo"
@@ -93,7 +93,7 @@ class TrainConfig:
     eval_episodes: int = 32
     max_steps: int = 50
     checkpoint_every: int = 25  # iterations
-    # SEAC and SePS train with A2C at their papers' defaults (ANCHORS.md); the PPO / TRPO fields
+    # SEAC and SePS train with A2C at their reference code's defaults (ASSUMPTIONS.md); the PPO / TRPO fields
     # above (rollout_len, lr, critic_lr, ppo_epochs, clip, max_grad_norm, ...) do not apply to them
     n_step: int = 5  # their n-step returns, and so their rollout length
     a2c_lr: float = 3e-4
@@ -129,8 +129,7 @@ class TrainConfig:
                      "eval_every", "eval_episodes", "max_steps", "checkpoint_every", "n_step", "seps_pretrain_steps"):
             whole(name)
         whole("seed", 0)
-        need(self.steps >= self.n_envs * self.rollout_steps, "steps",
-             f">= n_envs * rollout_len = {self.n_envs * self.rollout_steps} (one iteration)")
+        need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):
             real(name, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]")
@@ -190,8 +189,13 @@ class TrainConfig:
         return ALGOS[self.algo].shared if self.shared is None else self.shared
 
     @property
+    def iteration_steps(self) -> int:
+        """Env steps of one iteration: every copy's rollout."""
+        return self.n_envs * self.rollout_steps
+
+    @property
     def n_iterations(self) -> int:
-        return self.steps // (self.n_envs * self.rollout_steps)
+        return self.steps // self.iteration_steps
 
     def evaluates(self, iteration: int) -> bool:
         """Whether the run is evaluated after ``iteration`` iterations (0: before the first)."""
@@ -200,8 +204,7 @@ class TrainConfig:
     @property
     def eval_steps(self) -> list[int]:
         """The env steps of a finished run's evaluation rows."""
-        batch = self.n_envs * self.rollout_steps
-        return [it * batch for it in range(self.n_iterations + 1) if self.evaluates(it)]
+        return [it * self.iteration_steps for it in range(self.n_iterations + 1) if self.evaluates(it)]
 
     def flat(self) -> dict:
         """The config as CSV-friendly scalars."""

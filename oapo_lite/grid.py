@@ -102,7 +102,7 @@ class Figure:
 
 
 # Fig. 4 (Section 6.2) on SMAX. Per-map settings every budget shares: HARL's tuned SMAC settings
-# (ANCHORS.md) on the paper's maps, TrainConfig's (HARL's defaults) on the small ones. 64 copies
+# (PKU-MARL/HARL) on the paper's maps, TrainConfig's (HARL's defaults) on the small ones. 64 copies
 # x 50 steps is HARL's batch of 20 threads x 160 steps (3,200 transitions).
 SMAX_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 SMAX_BATCH = dict(n_envs=64, rollout_len=50, max_steps=100, checkpoint_every=10)
@@ -122,7 +122,7 @@ FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
 # Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
 FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
-# HARL's tuned GRF settings (ANCHORS.md); the engine itself ends academy episodes (<= 400 steps)
+# HARL's tuned GRF settings (PKU-MARL/HARL); the engine itself ends academy episodes (<= 400 steps)
 GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_steps=400)
 ENGINE_BUDGETS = ("smoke", "cpu", "paper")
 

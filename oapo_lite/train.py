@@ -67,8 +67,7 @@ def iterate(state: RunState, clock: dict) -> dict:
     metrics, detail = state.learner.learn(batch, state.step, it)
     clock["learn"] += time.perf_counter() - tic
     state.iteration = it + 1
-    state.history.append({"iteration": it + 1, "step": (it + 1) * cfg.n_envs * cfg.rollout_steps, **metrics,
-                          **detail})
+    state.history.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, **metrics, **detail})
     return metrics
 
 
@@ -79,7 +78,7 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
     cfg, it = state.cfg, state.iteration
     gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 3, it))
     ret, success = episode_scores(state.actors, state.owner, state.eval_env, gen, cfg.max_steps)
-    return {**cfg.flat(), "git_rev": revision, "iteration": it, "step": it * cfg.n_envs * cfg.rollout_steps,
+    return {**cfg.flat(), "git_rev": revision, "iteration": it, "step": it * cfg.iteration_steps,
             "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics}
 
 

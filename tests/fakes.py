@@ -11,7 +11,7 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     config's evaluation grid. ``columns`` adds or replaces columns."""
     steps = np.array(cfg.eval_steps)
     value = frac(steps // grid * grid)
-    df = pd.DataFrame({"algo": cfg.algo, "seed": cfg.seed, "iteration": steps // (cfg.n_envs * cfg.rollout_steps),
+    df = pd.DataFrame({"algo": cfg.algo, "seed": cfg.seed, "iteration": steps // cfg.iteration_steps,
                        "step": steps, "eval_return": value, "frac_opt": value, "eval_success": value,
                        "git_rev": "test", **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))

@@ -1,6 +1,6 @@
 """Google Research Football (``gfootball``) academy scenarios behind the ``VecStep`` interface.
 
-As in HARL's GRF setup (ANCHORS.md): one controlled left-team player per agent, ``simple115v2``
+As in HARL's GRF setup (PKU-MARL/HARL): one controlled left-team player per agent, ``simple115v2``
 observations, ``scoring,checkpoints`` rewards, the team reward (the mean of the players'
 rewards, which the two reward terms make equal) for everyone. The global state is every
 agent's observation, concatenated. ``episode_success`` is 1 when the left team scored.
