@@ -62,6 +62,7 @@ class Rollout:
     # so the losses take the plain means there
     active: torch.Tensor | None = None
     episode_returns: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)  # spent in the policy forwards and in env stepping
 
 
 def sample_actions(actors: Actors, weights, step, gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
@@ -72,8 +73,9 @@ def sample_actions(actors: Actors, weights, step, gen: torch.Generator) -> tuple
     return a, actors.head.log_prob(d, a)
 
 
-def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch.Generator, clock: dict):
-    """Run every seat's actor in one batched forward per step for ``length`` steps."""
+def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch.Generator):
+    """Run every seat's actor in one batched forward per step for ``length`` steps. Returns the
+    batch and the envs' last step (where the next rollout starts)."""
     N, n, continuous = env.n_envs, env.n_agents, actors.head.continuous
     obs = np.empty((length, N, n, env.obs_dim), np.float32)
     avail = np.empty((length, N, n, env.n_actions), bool)
@@ -85,7 +87,7 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     act = (torch.empty((length, n, N, env.n_actions)) if continuous
            else torch.empty((length, n, N), dtype=torch.long))
     logp = torch.empty((length, n, N))
-    returns = []
+    returns, seconds = [], {"policy": 0.0, "env": 0.0}
     with torch.inference_mode():
         weights = actors.stack(owner)
     for t in range(length):
@@ -95,15 +97,15 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
             act[t], logp[t] = sample_actions(actors, weights, step, gen)
         toc = time.perf_counter()
         step = env.step(act[t].transpose(0, 1).numpy())
-        clock["policy"] += toc - tic
-        clock["env"] += time.perf_counter() - toc
+        seconds["policy"] += toc - tic
+        seconds["env"] += time.perf_counter() - toc
         reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
         returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
     state[length] = step.state
     batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
                     *(torch.from_numpy(_per_agent(x.numpy(), 1)) for x in (act, logp)),
                     *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
-                    None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns)
+                    None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns, seconds)
     return batch, step
 
 

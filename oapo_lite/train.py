@@ -61,8 +61,9 @@ def iterate(state: RunState, clock: dict) -> dict:
     """One iteration: a rollout from where the last one ended, then the learner's update. Appends
     to ``state.history`` and returns the metrics that go into the next evaluation row."""
     cfg, it = state.cfg, state.iteration
-    batch, state.step = collect(state.env, state.step, state.actors, state.owner, cfg.rollout_steps,
-                                state.act_gen, clock)
+    batch, state.step = collect(state.env, state.step, state.actors, state.owner, cfg.rollout_steps, state.act_gen)
+    for part, seconds in batch.seconds.items():
+        clock[part] += seconds
     tic = time.perf_counter()
     metrics, detail = state.learner.learn(batch, state.step, it)
     clock["learn"] += time.perf_counter() - tic

@@ -183,7 +183,7 @@ def test_source_gradients_add_up_to_the_gradient_of_the_weighted_objective(clip)
     with torch.no_grad():  # move net 1 away from net 0, so that ratios differ from 1 and clipping acts
         for p in actors.net_params(1):
             p.add_(0.3 * torch.randn(p.shape, generator=gen))
-    batch, _ = collect(env, env.reset(), actors, [0, 1], cfg.rollout_len, gen, {"env": 0.0, "policy": 0.0})
+    batch, _ = collect(env, env.reset(), actors, [0, 1], cfg.rollout_len, gen)
     adv = torch.randn(batch.act.shape[1], generator=gen)
     m = np.array([[0.7, 0.3], [0.0, 1.0]])
     g = source_gradients(actors, batch.inputs, batch, m, adv, clip)[:, :, 0]

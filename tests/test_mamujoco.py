@@ -43,7 +43,7 @@ def test_actions_reach_the_engine_inside_the_box_even_from_extreme_policies():
     with torch.no_grad():  # means of +-50 (far outside [-1, 1]) in alternating dimensions
         for k in range(2):
             actors.weights[k][-2].copy_(torch.tensor([50.0, -50.0, 50.0]))
-    batch, _ = collect(vec, vec.reset(), actors, [0, 1], 10, gen, {"env": 0.0, "policy": 0.0})
+    batch, _ = collect(vec, vec.reset(), actors, [0, 1], 10, gen)
     sent = np.stack(sent)
     assert sent.shape == (20, 2, 3)
     assert (batch.act.abs() > 10).all()  # the policy's own actions are far out of bounds

@@ -57,8 +57,7 @@ def test_nstep_returns_match_a_hand_computation():
 def _batch(n_envs=4, seed=0):
     env = make_vec("black_blue_red", n_envs, 50)
     actors = Actors(3, env.obs_dim, env.n_actions, (16,), False, torch.Generator().manual_seed(seed))
-    batch, step = collect(env, env.reset(), actors, [0, 1, 2], 5, torch.Generator().manual_seed(seed + 1),
-                          {"env": 0.0, "policy": 0.0})
+    batch, step = collect(env, env.reset(), actors, [0, 1, 2], 5, torch.Generator().manual_seed(seed + 1))
     return env, actors, batch, torch.from_numpy(step.obs)
 
 

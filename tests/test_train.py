@@ -200,8 +200,7 @@ def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
     env = make_vec(cfg.env, cfg.n_envs, cfg.max_steps)
     actors = Actors(3, env.obs_dim, env.n_actions, cfg.hidden, False, torch.Generator().manual_seed(0))
     opts = [torch.optim.Adam(actors.net_params(k), lr=cfg.lr) for k in range(3)]
-    clock = {"env": 0.0, "policy": 0.0}
-    batch, _ = collect(env, env.reset(), actors, [0, 1, 2], cfg.rollout_len, torch.Generator().manual_seed(1), clock)
+    batch, _ = collect(env, env.reset(), actors, [0, 1, 2], cfg.rollout_len, torch.Generator().manual_seed(1))
     W = np.full((3, 3), 1 / 3)
     adv = torch.randn(batch.act.shape[1], generator=torch.Generator().manual_seed(2))
     factor, _, _ = update_actors(actors, opts, batch, W, [0, 1, 2], [2, 0, 1], adv, ALGOS[algo], cfg,
@@ -443,7 +442,7 @@ def test_samples_of_an_agent_that_left_change_neither_k_nor_any_update(tmp_path,
     env = PettingZooVec(lambda: Toy(leave=2), n_envs=4, seed=0)
     actors = Actors(2, env.obs_dim, env.n_actions, (16,), False, torch.Generator().manual_seed(0))
     gen = torch.Generator().manual_seed(1)
-    batch, _ = collect(env, env.reset(), actors, [0, 1], 10, gen, {"env": 0.0, "policy": 0.0})
+    batch, _ = collect(env, env.reset(), actors, [0, 1], 10, gen)
     gone = ~batch.active
     assert gone[1].any() and not gone[0].any()
     inputs = dataclasses.replace(batch.inputs, index=torch.where(gone, batch.inputs.index[[0, 0]], batch.inputs.index))
