@@ -222,14 +222,19 @@ def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.Data
     names them; with none on disk the frame is empty and no CSV is written)."""
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
-        if skip_missing and not on_disk(cfg, budget):
-            missing.append(run_id(cfg))
+        try:
+            frames.append(read_run(cfg, budget).assign(label=label, figure=figure))
             continue
-        if not run_path(cfg, budget).exists():
-            raise FileNotFoundError(f"run {run_id(cfg)} of {figure} (curve {label!r}) is not on disk; train it with "
-                                    f"`python -m oapo_lite reproduce --budget {budget} --figures {figure}` or "
-                                    "experiments.train_runs")
-        frames.append(read_run(cfg, budget).assign(label=label, figure=figure))
+        except FileNotFoundError:
+            if not skip_missing:
+                raise FileNotFoundError(f"run {run_id(cfg)} of {figure} (curve {label!r}) is not on disk; train it "
+                                        f"with `python -m oapo_lite reproduce --budget {budget} --figures {figure}` "
+                                        "or experiments.train_runs") from None
+        except DamagedFile as err:
+            if not skip_missing:
+                raise
+            print(f"warning: {err}", file=sys.stderr)
+        missing.append(run_id(cfg))
     if not frames:
         return pd.DataFrame()
     df = pd.concat(frames, ignore_index=True)
