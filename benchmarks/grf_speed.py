@@ -50,9 +50,9 @@ def loop(name: str, iterations: int = 3) -> tuple[float, dict]:
                       eval_episodes=2)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        rows = train(cfg, tmp, progress=False)
+        timing = {}
+        train(cfg, tmp, progress=False, timing=timing)
         wall = time.perf_counter() - start
-    timing = rows.attrs["timing"]
     return cfg.steps / (wall - timing["eval"]), {k: v / (wall - timing["eval"]) for k, v in timing.items() if k != "eval"}
 
 

@@ -59,10 +59,10 @@ def loop(name: str, steps: int) -> tuple[tuple[float, float], dict]:
     b = get_figure("figA_mamujoco").budget("cpu")
     cfg = TrainConfig(algo="oappo", env=f"mamujoco:{name}", steps=steps, eval_every=10_000, eval_episodes=1,
                       **{**b.config, "checkpoint_every": 10_000})
-    out = {}
+    timing = {}
     with tempfile.TemporaryDirectory() as tmp:
-        t = timed(lambda: out.update(rows=train(cfg, tmp, progress=False)))
-    return t, out["rows"].attrs["timing"]
+        t = timed(lambda: train(cfg, tmp, progress=False, timing=timing))
+    return t, timing
 
 
 def main() -> None:

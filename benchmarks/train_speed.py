@@ -20,9 +20,9 @@ def measure(algo: str, steps: int) -> dict:
     cfg = TrainConfig(algo=algo, env="black_red", seed=0, steps=steps, eval_every=10)
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
-        result = train(cfg, out, resume=False, progress=False)
+        timing = {}
+        train(cfg, out, resume=False, progress=False, timing=timing)
         wall = time.perf_counter() - start
-    timing = result.attrs["timing"]
     return {"algo": algo, "steps_per_s": cfg.n_iterations * cfg.n_envs * cfg.rollout_len / wall, "wall": wall,
             **{k: v / wall for k, v in timing.items()}}
 

@@ -26,6 +26,7 @@ from scipy.sparse.linalg import spsolve
 
 from oapo_lite.envs.core import STEP_COST
 from oapo_lite.envs.maps import Maze, reachable
+from oapo_lite.reuse import categorical_kl
 
 MAX_DENSE_ENTRIES = 50_000_000  # S * A_joint * S floats held in P (400 MB)
 
@@ -255,9 +256,7 @@ def kl_max(p: np.ndarray, q: np.ndarray, weights: np.ndarray | None = None) -> f
     p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
     if p.shape != q.shape or p.ndim != 2:
         raise ValueError(f"p and q must be (n_obs, n_actions) tables of one shape, got {p.shape} and {q.shape}")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        terms = np.where(p > 0, p * (np.log(p) - np.log(q)), 0.0)
-    kl = terms.sum(-1)
+    kl = categorical_kl(p, q)
     if weights is not None:
         keep = np.asarray(weights) > 0
         if keep.shape != kl.shape:

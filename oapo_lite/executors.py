@@ -37,7 +37,6 @@ def train_job(cfg, checkpoints: str):
             rows = train(cfg, checkpoints, resume=False, progress=False)
     except Exception:
         return None, traceback.format_exc()
-    rows.attrs.clear()  # the per-iteration history is not part of the result; no need to ship it
     return rows, None
 
 

@@ -79,6 +79,17 @@ def matrix_for(kind: str, kl: np.ndarray, sigma: float, reuse_lambda: float, all
     raise ValueError(f"unknown reuse kind {kind!r}; choose from {list(REUSE_KINDS)}")
 
 
+def categorical_kl(p: np.ndarray, q: np.ndarray, eps: float = 0.0) -> np.ndarray:
+    """KL(p || q) of categorical distributions along the last axis (actions), with 0 log 0 = 0:
+    the one KL of discrete policies behind Eq. 9's K, tabular and neural. With ``eps`` > 0 the
+    probabilities are clipped at ``eps`` before the log, so a neural policy whose probability
+    rounded to 0 gives a large finite KL rather than inf; with 0 the KL is exact (inf where
+    q = 0 < p)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_p, log_q = (np.log(np.clip(x, eps, None) if eps else x) for x in (p, q))
+        return np.where(p == 0, 0.0, p * (log_p - log_q)).sum(-1)  # a NaN stays NaN (a diverged net)
+
+
 def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
     """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations.
 
@@ -93,9 +104,7 @@ def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.
         raise ValueError(f"KL estimator must be 'max' or 'mean', got {reduce!r}")
     n = probs.shape[0]
     own = probs[np.arange(n), np.arange(n)]  # (n_sources, batch, actions)
-    logp = np.log(np.clip(probs, eps, None))
-    kl = (own[None] * (np.log(np.clip(own, eps, None))[None] - logp)).sum(-1)  # (i, j, batch)
-    kl = np.maximum(kl, 0.0)
+    kl = np.maximum(categorical_kl(own[None], probs, eps), 0.0)  # (i, j, batch)
     return kl.max(-1) if reduce == "max" else kl.mean(-1)
 
 

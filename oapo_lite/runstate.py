@@ -127,6 +127,12 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     return ck
 
 
+def load_history(out_dir: str | Path) -> list[dict]:
+    """A run's per-iteration metrics (losses, K, M, the mapping drawn, ...), one dict per
+    iteration, from the checkpoint where they are kept with the rest of the run state."""
+    return load_checkpoint(out_dir)["history"]
+
+
 def check_resumable(cfg: TrainConfig, ck: dict) -> None:
     """A checkpoint can continue ``cfg`` if it has every current field and only ``steps``
     differs, and grows."""

@@ -8,7 +8,8 @@ advantage from one centralised critic and GAE, the policy distances K and the re
 experience of its sources (Eq. 8, or Eq. 7's trust-region step) with the sequential factor,
 then the critic; for SEAC / SePS their A2C step (``a2c.Learner``). Then the loop evaluates and
 checkpoints. ``train(cfg, out_dir)`` returns the evaluation rows as a DataFrame and keeps
-``results.csv`` and ``checkpoint.pt`` in ``out_dir``.
+``results.csv`` and ``checkpoint.pt`` in ``out_dir``; the per-iteration history lives in the
+checkpoint (``runstate.load_history``).
 """
 from __future__ import annotations
 
@@ -29,14 +30,15 @@ from oapo_lite.store import Lock
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
-          callback: Callable[[dict], None] | None = None) -> pd.DataFrame:
+          callback: Callable[[dict], None] | None = None, timing: dict | None = None) -> pd.DataFrame:
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
     ``results.csv`` is written with every checkpoint. With ``resume``, continue from
     ``out_dir/checkpoint.pt`` if present (and write ``results.csv`` again from it); the result
-    is then identical to an uninterrupted run. ``callback(metrics)`` is called after every iteration.
-    ``result.attrs``: ``history`` (per-iteration metrics) and ``timing`` (seconds in env
-    stepping, policy forwards during rollouts, learning and evaluation).
+    is then identical to an uninterrupted run. ``callback(metrics)`` is called after every
+    iteration. A ``timing`` dict is filled with the seconds spent in env stepping, policy
+    forwards during rollouts, learning and evaluation (for the benchmarks). The per-iteration
+    metrics are in the checkpoint: ``runstate.load_history(out_dir)``.
     """
     out = Path(out_dir)
     try:
@@ -51,7 +53,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores
     try:
-        return _train(cfg, out, resume, progress, callback)
+        return _train(cfg, out, resume, progress, callback, {} if timing is None else timing)
     finally:
         torch.set_num_threads(threads)
         lock.release()
@@ -83,14 +85,14 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
             "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics}
 
 
-def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback) -> pd.DataFrame:
+def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, clock: dict) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
     state, revision = RunState.start(cfg), git_revision()
     if resume and (out / "checkpoint.pt").exists():
         state.load_state_dict(load_checkpoint(out))
         save_results(state.rows, out)  # a results.csv deleted or damaged after the checkpoint comes back
-    clock = {"env": 0.0, "policy": 0.0, "learn": 0.0, "eval": 0.0}
+    clock.update(env=0.0, policy=0.0, learn=0.0, eval=0.0)
 
     def evaluate_now(metrics: dict) -> None:
         tic = time.perf_counter()
@@ -113,10 +115,7 @@ def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback) 
             state.save(out)
         if callback is not None:
             callback(state.history[-1])
-    result = pd.DataFrame(state.rows)
-    result.attrs["timing"] = dict(clock)
-    result.attrs["history"] = state.history
-    return result
+    return pd.DataFrame(state.rows)
 
 
 def _diverged_at(err: Diverged, state: RunState, out: Path) -> Diverged:

@@ -96,6 +96,18 @@ def test_kl_matrix_against_direct_sum():
         reuse.kl_matrix(probs, "median")
 
 
+def test_categorical_kl_is_exact_without_eps_and_finite_with_it():
+    """The one categorical KL behind every K: 0 log 0 = 0; a zero where the source acts is
+    inf exactly (tabular policies), and log(1 / eps)-sized when clipped (neural policies)."""
+    p = np.array([[0.5, 0.5, 0.0], [1.0, 0.0, 0.0]])
+    q = np.array([[0.25, 0.25, 0.5], [0.0, 1.0, 0.0]])
+    kl = reuse.categorical_kl(p, q)
+    assert kl[0] == pytest.approx(np.log(2.0))  # by hand: 2 * 0.5 * log(0.5 / 0.25)
+    assert kl[1] == np.inf
+    assert reuse.categorical_kl(p, q, eps=1e-12)[1] == pytest.approx(np.log(1e12))
+    assert (reuse.categorical_kl(p, p) == 0.0).all()
+
+
 def test_sample_mapping_frequencies_match_m():
     m = reuse.oapo_matrix(random_kl(4, 2), 0.3, 0.4)
     rng = np.random.default_rng(0)

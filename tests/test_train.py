@@ -17,7 +17,7 @@ from oapo_lite.nets import Actors, Categorical
 from oapo_lite.config import ALGOS, TrainConfig
 from oapo_lite.reuse import check_spaces
 from oapo_lite.rollout import Inputs, Rollout, collect
-from oapo_lite.runstate import load_checkpoint
+from oapo_lite.runstate import load_checkpoint, load_history
 from oapo_lite.train import train
 from oapo_lite.update import Sources, learner_dists, policy_distances, update_actors
 
@@ -181,9 +181,9 @@ def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, mo
         return real(actors, opts, batch, W, *args)
 
     monkeypatch.setattr(train_module, "update_actors", spy)
-    rows = _run(tmp_path, "sample", algo="oappo", reuse_mode="sample", sigma=10.0, reuse_lambda=0.2,
-                **{**SMALL_BR, "steps": 2000})
-    history = rows.attrs["history"]
+    _run(tmp_path, "sample", algo="oappo", reuse_mode="sample", sigma=10.0, reuse_lambda=0.2,
+         **{**SMALL_BR, "steps": 2000})
+    history = load_history(tmp_path / "sample")
     drawn = np.array([W.argmax(1) for W in seen])
     for W, h in zip(seen, history):
         M = h["reuse_matrix"]
@@ -216,8 +216,8 @@ def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
 
 
 def test_every_accepted_trpo_step_stays_within_delta(tmp_path):
-    rows = _run(tmp_path, "trpo", algo="oatrpo", kl_threshold=0.005, **SMALL_BR)
-    history = rows.attrs["history"]
+    _run(tmp_path, "trpo", algo="oatrpo", kl_threshold=0.005, **SMALL_BR)
+    history = load_history(tmp_path / "trpo")
     kls = [k for h in history for k in h["trpo_kls"] if not math.isnan(k)]
     assert len(kls) >= len(history)  # most learner steps are accepted
     assert max(kls) <= 0.005
