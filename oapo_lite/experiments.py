@@ -216,10 +216,9 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
                            "(reported above)")
 
 
-def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
-    """The tidy rows of one figure, read from the run cache (nothing is trained: ``train_runs``).
-    A run not on disk raises naming it, or with ``skip_missing`` is left out (``missing_runs``
-    names them; with none on disk the frame is empty and no CSV is written)."""
+def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
+    """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
+    with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
         try:
@@ -235,9 +234,15 @@ def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.Data
                 raise
             print(f"warning: {err}", file=sys.stderr)
         missing.append(run_id(cfg))
-    if not frames:
-        return pd.DataFrame()
-    df = pd.concat(frames, ignore_index=True)
+    return (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()), missing
+
+
+def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
+    """``read_figure``, saying what it left out, and the rows written to the figure's CSV
+    (``<data>/<figure>.csv``, what a researcher opens; nothing is trained: ``train_runs``)."""
+    df, missing = read_figure(figure, budget, skip_missing)
+    if df.empty:
+        return df
     write_frame(df, data_dir(budget) / f"{figure}.csv")
     if missing:
         print(f"warning: {figure} at budget {budget!r} leaves out {len(missing)} runs not on disk (missing_runs)")

@@ -74,6 +74,8 @@ class Figure:
     measure; ``claims``: the paper's claims about it, as (test, the curves it compares, the
     claim), judged by ``verdicts.claims``; with ``claims_per_env`` (the prefix of the ``env``
     column) each claim starts with the env it is judged on, on that env's runs alone.
+    ``section`` and ``notebook``: where the paper and this repository show it; ``reference``:
+    whose steps its ``paper`` budget is ("": the paper gives none, the budget is ours).
     """
 
     id: str
@@ -88,6 +90,9 @@ class Figure:
     metric: Metric = FRAC_OPT
     claims: tuple = ()
     claims_per_env: str | None = None
+    section: str = ""
+    notebook: str = ""
+    reference: str = ""
 
     def budget(self, name: str, env: str | None = None) -> Budget:
         """This figure's budget ``name`` (for the curves on ``env``, if it has its own)."""
@@ -159,15 +164,24 @@ GRID = (
                (faster, ("oatrpo", "happo"), "OATRPO converges faster than HAPPO"),
                (higher, ("oappo", "mappo"), "OAPPO ends above MAPPO"),
                (higher, ("oatrpo", "mappo"), "OATRPO ends above MAPPO"),
-               (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO"))),
+               (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO")),
+           section="6.1", notebook="11_black_red_fig3b"),
     Figure("fig3c", tuple((s, dict(algo="oappo", sigma=s)) for s in SIGMAS), common=dict(env="black_red"),
            claims=tuple((better, (TrainConfig.sigma, s), f"sigma = {TrainConfig.sigma:g} beats sigma = {s:g} ({why})")
-                        for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS))),
+                        for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS)),
+           section="6.1", notebook="12_sigma_lambda_fig3cd"),
     Figure("fig3d", tuple((lam, dict(algo="oappo", reuse_lambda=lam)) for lam in LAMBDAS), common=dict(env="black_red"),
-           claims=((better, (LAM_07, LAM_04), f"lambda = {LAM_07:g} is marginally better than lambda = {LAM_04:g}"),
-                   (better, (LAM_04, LAM_1), f"lambda = {LAM_04:g} beats lambda = {LAM_1:g} (own experience only)"),
-                   (better, (LAM_04, LAM_02), f"lambda = {LAM_04:g} beats lambda = {LAM_02:g} (mostly others' "
-                                              "experience)"))),
+           # the paper: 0.2 risks a local optimum, 1 converges later than 0.4 / 0.7, which "strike a
+           # balance", 0.7 only marginally better than 0.4
+           claims=((stuck, (LAM_02,), f"lambda = {LAM_02:g} (mostly others' experience) gets stuck in a local optimum"),
+                   (optimal, (LAM_07,), f"lambda = {LAM_07:g} strikes a balance: it reaches the optimum"),
+                   (optimal, (LAM_04,), f"lambda = {LAM_04:g} strikes a balance too (0.7 only marginally better): "
+                                        "it reaches the optimum"),
+                   (faster, (LAM_07, LAM_1), f"lambda = {LAM_1:g} (own experience only) converges later than "
+                                             f"lambda = {LAM_07:g}"),
+                   (faster, (LAM_04, LAM_1), f"lambda = {LAM_1:g} (own experience only) converges later than "
+                                             f"lambda = {LAM_04:g}")),
+           section="6.1", notebook="12_sigma_lambda_fig3cd"),
     # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that the mask
     # alone decides, as in the paper's "modified OAPPO parameters".
     Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), reuse_lambda=SCHEME_LAM[s]))
@@ -175,15 +189,19 @@ GRID = (
                (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
                (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
                (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
-               (optimal, ("NR",), "NR (no reuse) reaches the optimum"))),
-    Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1),
+               (optimal, ("NR",), "NR (no reuse) reaches the optimum")),
+           section="6.1", notebook="13_black_blue_red_fig5b"),
+    Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1,
+           section="3", notebook="14_policy_distance_fig1"),
     # label: the algorithm; the maze is the ``env`` column
-    Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS)),
+    Figure("fig_baselines_mazes", tuple((a, dict(algo=a, env=m)) for m in MAZES for a in BASELINE_ALGOS),
+           notebook="15_baselines_seac_seps"),
     # Issue 12's adaptive reuse rule against the fixed Eq. 9 (sigma 0.1, lambda 0.7: the best of
     # Fig. 3c-d's grid) and no reuse, on both paper mazes; and both at lambda 0.4 on Black-Red,
     # where the fixed rule is trapped (Fig. 3d)
     Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)
-           + tuple((f"{label} lambda=0.4", dict(env="black_red", reuse_lambda=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2])),
+           + tuple((f"{label} lambda=0.4", dict(env="black_red", reuse_lambda=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2]),
+           notebook="17_adaptive_reuse"),
     # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits 2 hours on 2
     # cores (benchmarks/smax_speed.py): the two small maps, on which learning shows within it;
     # the paper's maps need millions of steps and run at ``paper`` (HARL's steps per map).
@@ -197,7 +215,9 @@ GRID = (
                    "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
                    "smax:6h_vs_8z": dict(steps=40_000_000), "smax:3s5z_vs_3s6z": dict(steps=20_000_000),
                    "smax:MMM2_like_7m2M_vs_8m3M": dict(steps=20_000_000)}),
-           }, metric=WIN_RATE, claims=tuple(SMAX_CLAIMS), claims_per_env="smax:"),
+           }, metric=WIN_RATE, claims=tuple(SMAX_CLAIMS), claims_per_env="smax:",
+           section="6.2", notebook="20_smax_fig4",
+           reference="HARL's steps for the map"),
     # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
     Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env="mamujoco:HalfCheetah-2x3"),
            runs_at=ENGINE_BUDGETS, budgets={
@@ -213,9 +233,10 @@ GRID = (
                (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
                (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
                (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
-               (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)"))),
+               (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)")),
+           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
-    # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run), so 18
+    # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run, so 18
     # runs of 32k steps on 3_vs_1_with_keeper (the scenario HARL learns fastest) fit 2 hours.
     Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
            runs_at=ENGINE_BUDGETS, budgets={
@@ -228,7 +249,8 @@ GRID = (
                              envs={f"grf:academy_{s}": {} for s in GRF_SCENARIOS[:3]}
                              | {"grf:academy_counterattack_hard": dict(
                                  steps=50_000_000, config=dict(GRF_HARL, n_envs=50, rollout_len=1000))}),
-           }, metric=SCORE, claims=tuple(GRF_CLAIMS), claims_per_env="grf:academy_"),
+           }, metric=SCORE, claims=tuple(GRF_CLAIMS), claims_per_env="grf:academy_",
+           section="6.3", notebook="22_grf_fig6b", reference="HARL's tuned GRF steps"),
 )
 FIGURES = tuple(f.id for f in GRID)
 MAZE_FIGURES = tuple(f.id for f in GRID if f.runs_at is None)  # Section 6.1; the others run real engines

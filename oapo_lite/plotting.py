@@ -6,36 +6,69 @@ import numpy as np
 import pandas as pd
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
-YLABELS = {"frac_opt": "return / oracle optimum", "eval_return": "episode return (evaluation)",
-           "eval_success": "win rate"}
+YLABELS = {"frac_opt": "return / oracle optimum (below 0: worse than doing nothing)",
+           "eval_return": "episode return (evaluation)", "eval_success": "win rate"}
+# One colour per algorithm and per agent in every figure. The agents are named after their
+# colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
+ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
+               "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf"}
+AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
+REUSED, OMITTED = "#e6a100", "#9a9a9a"
+
+
+def color_of(label, order=None):
+    """The colour of a curve: its algorithm's (the first word of the label, any case: "OAPPO",
+    "oappo adaptive"), else the label's place in ``order`` on a sequential map (a sigma, a lambda,
+    a reuse scheme), else None (matplotlib's next colour)."""
+    word = str(label).split()[0].lower() if str(label).strip() else ""
+    if word in ALGO_COLORS:
+        return ALGO_COLORS[word]
+    if order is not None and label in list(order):
+        k, n = list(order).index(label), len(order)
+        return plt.cm.viridis(0.1 + 0.75 * k / max(n - 1, 1))
+    return None
 
 
 def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None):
-    """Fig. 3b-d, 4, App. A: mean over seeds (line) and standard deviation (band) of ``y``
-    against env steps."""
+    """Fig. 3b-d, 4, App. A: every seed as a thin line and the interquartile mean over seeds
+    (bold) of ``y`` against env steps. Per-seed lines rather than mean +- std: outcomes that
+    split into trapped and optimal seeds have a mean that describes no run and a band that
+    leaves the possible range. The title gets a line saying so."""
+    from oapo_lite.verdicts import iqm
+
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     for label in order:
-        g = df[df["label"] == label].groupby("step")[y]
-        mean, std = g.mean(), g.std(ddof=0).fillna(0.0)
-        line, = ax.plot(mean.index, mean.values, label=str(label))
-        ax.fill_between(mean.index, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+        runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)
+        color = color_of(label, order)
+        line, = ax.plot(runs.index, iqm(runs.to_numpy(float), axis=1), lw=2.2, label=str(label), color=color)
+        ax.plot(runs.index, runs.to_numpy(float), lw=0.6, alpha=0.35, color=line.get_color())
     if y == "frac_opt":
         ax.axhline(1.0, color="grey", ls="--", lw=1)
-    ax.set(xlabel="environment steps", ylabel=ylabel or YLABELS.get(y, y), title=title)
+    seeds = df.groupby("label")["seed"].nunique()
+    note = f"bold: IQM over {'/'.join(map(str, sorted(set(seeds))))} seeds; thin: each seed"
+    ax.set(xlabel="environment steps", ylabel=ylabel or YLABELS.get(y, y),
+           title=f"{title}\n{note}" if title else note)
     ax.legend(frameon=False)
     return ax
 
 
 def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
-    """Fig. 5b: final fraction of the optimum per label, bars with the std over seeds."""
+    """Fig. 5b: final fraction of the optimum per label: the IQM over seeds as a bar, every seed
+    as a dot (trapped and optimal seeds stay visible; no std band beyond the optimum)."""
+    from oapo_lite.verdicts import iqm
+
     ax = ax or plt.subplots(figsize=(5, 4))[1]
     order = order if order is not None else list(dict.fromkeys(runs["label"]))
-    g = runs.groupby("label")["final"]
-    mean, std = g.mean().reindex(order), g.std(ddof=0).reindex(order).fillna(0.0)
-    ax.bar([str(o) for o in order], mean, yerr=std, capsize=4, color="tab:blue", alpha=0.8)
+    finals = [runs.loc[runs["label"] == o, "final"].to_numpy(float) for o in order]
+    colors = [color_of(o, order) for o in order]
+    ax.bar([str(o) for o in order], [iqm(f) for f in finals], color=colors, alpha=0.6)
+    for k, f in enumerate(finals):
+        ax.plot(np.full(len(f), k) + np.linspace(-0.15, 0.15, len(f)), f, "o", ms=4, color="black")
     ax.axhline(1.0, color="grey", ls="--", lw=1)
-    ax.set(ylabel="final return / oracle optimum", title=title, ylim=(min(0, mean.min() - 0.1), 1.1))
+    low = min(0.0, min(f.min() for f in finals) - 0.1)
+    note = f"bar: IQM over seeds; dots: each of {max(len(f) for f in finals)} seeds"
+    ax.set(ylabel="final return / oracle optimum", title=f"{title}\n{note}" if title else note, ylim=(low, 1.1))
     return ax
 
 
@@ -53,7 +86,7 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
         mid, low, high = (rows[f"{metric}_{c}"].to_numpy(float) for c in ("iqm", "low", "high"))
         shift = (k - (len(labels) - 1) / 2) * 0.08  # side by side, so overlapping intervals stay readable
         ax.errorbar(ticks + shift, mid, yerr=[mid - np.fmin(low, mid), np.fmax(high, mid) - mid], marker="o",
-                    capsize=3, label=str(label), color=(colors or {}).get(label))
+                    capsize=3, label=str(label), color=(colors or {}).get(label) or color_of(label))
     ax.set_xticks(ticks, [f"{x[name]:g}" if isinstance(x[name], float) else str(x[name]) for name in order])
     ax.set(title=title, ylabel=ylabel)
     return ax
@@ -79,8 +112,8 @@ def reuse_heatmap(m: np.ndarray, ax=None, title=None, names=None):
 def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=None, title=None):
     """Fig. 1 (right): other agents placed at their KL distance from the learner.
 
-    Inside the circle of radius sigma their experience is reused (red); outside it is
-    omitted (blue). The radial axis is log-scaled (three decades below sigma up to the
+    Inside the circle of radius sigma their experience is reused (amber); outside it is
+    omitted (grey): colours that are no agent's name. The radial axis is log-scaled (three decades below sigma up to the
     farthest peer) so that both 0.0001 and 10 fit.
     """
     if not 0 < sigma < np.inf:
@@ -90,9 +123,9 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
     radius = lambda d: np.log10(max(d, floor) / floor)  # noqa: E731 -- local scale only
     r_sigma = radius(sigma)
     outer = 1.35 * max(r_sigma, max(radius(d) for d in kl_row))
-    ax.add_patch(plt.Circle((0, 0), r_sigma, color="tab:red", alpha=0.12))
-    ax.add_patch(plt.Circle((0, 0), outer, color="tab:blue", alpha=0.06, zorder=0))
-    ax.add_patch(plt.Circle((0, 0), r_sigma, fill=False, color="tab:red", lw=1.5))
+    ax.add_patch(plt.Circle((0, 0), r_sigma, color=REUSED, alpha=0.15))
+    ax.add_patch(plt.Circle((0, 0), outer, color=OMITTED, alpha=0.08, zorder=0))
+    ax.add_patch(plt.Circle((0, 0), r_sigma, fill=False, color=REUSED, lw=1.5))
     ax.plot(0, 0, "k*", ms=14)
     ax.annotate(f"{names[learner]} (learner)", (0, 0), xytext=(-8, -4), textcoords="offset points", ha="right", va="top")
     others = [j for j in range(len(names)) if j != learner]
@@ -100,8 +133,8 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
         angle = 2 * np.pi * (k + 0.5) / len(others)
         r = radius(kl_row[j])
         inside = kl_row[j] <= sigma
-        ax.plot(r * np.cos(angle), r * np.sin(angle), "o", ms=10,
-                color="tab:red" if inside else "tab:blue")
+        ax.plot(r * np.cos(angle), r * np.sin(angle), "o", ms=12, color=AGENT_COLORS.get(names[j], "grey"),
+                markeredgecolor=REUSED if inside else OMITTED, markeredgewidth=3)
         ax.annotate(f"{names[j]}\nKL={kl_row[j]:.3g}", (r * np.cos(angle), r * np.sin(angle)),
                     xytext=(10, 0), textcoords="offset points", va="center")
     ax.set_xlim(-outer, outer)
@@ -109,5 +142,5 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
     ax.set_aspect("equal")
     ax.set_xticks([])
     ax.set_yticks([])
-    ax.set_title(title or f"reuse radius sigma = {sigma:g} (red: reused, blue: omitted)")
+    ax.set_title(title or f"reuse radius sigma = {sigma:g} (amber: reused, grey: omitted)")
     return ax

@@ -16,23 +16,24 @@ each curve (the Mann-Whitney U statistic over n_a n_b), and 95% percentile boots
 confidence intervals in which every curve's runs are resampled on their own (the stratified
 bootstrap with one stratum per curve). With one seed there is no interval (NaN).
 
-The decision rule (``status``) reads the intervals:
+The decision rule (``RULE``, printed where the verdicts are introduced) reads, in order:
 
-* a pairwise claim "a beats b" is *reproduced* when the whole 95% interval of P(a better
-  than b) lies above 0.5, *direction only* when its point estimate does, *not reproduced*
-  otherwise;
-* "a stays below the threshold" (``stuck``) is reproduced when the whole interval of a's
-  final IQM lies below it, direction only when the IQM does; "a reaches it" (``optimal``)
-  when the whole interval lies at or above it, direction only when the IQM does.
+1. *not testable at this budget* when the data cannot decide: fewer than two seeds of a
+   curve; a curve that did not learn (below); for "faster", no seed of either curve reaching
+   the threshold;
+2. a pairwise claim "a beats b" is *reproduced* when the whole 95% interval of P(a better
+   than b) lies above 0.5, *contradicted* when it lies below 0.5, *direction only* when only
+   the point estimate is above 0.5, *not reproduced* otherwise; "a stays below the threshold"
+   (``stuck``) and "a reaches it" (``optimal``) read the interval of a's final IQM the same way;
+3. "faster" is *not reproduced* whenever fewer seeds of a than of b reached the threshold,
+   whatever P says: a seed that never got there is not evidence of speed, and the reason is
+   printed with the verdict.
 
-"Faster" also needs at least as many seeds to have reached the threshold: a censored seed
-never counts in a run's favour. The former rule is kept as ``se_status``: a difference of
-means in the claimed direction larger than twice the combined standard error over seeds
-(std with ddof = 1) is reproduced, a smaller one direction only.
-
-A claim is *not testable at this budget* when the data cannot decide it: fewer than two seeds
-of a curve, no run of its curves ever above the metric's floor (nothing was learned), or, for
-speed, no seed of either curve reaching the threshold.
+A curve *learned* at a budget when its runs' final level exceeds their initial level (the
+mean of the first evaluations, the untrained policy) by more than twice the standard error
+of that gain over seeds, and its final IQM is above the metric's floor (a 5% win rate or
+score; none for fractions of the optimum or returns): not one lucky evaluation, not one
+lucky seed.
 """
 from __future__ import annotations
 
@@ -45,7 +46,8 @@ from scipy import stats
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
-NOT_TESTABLE = "not testable at this budget"
+CONTRADICTED, NOT_TESTABLE = "contradicted", "not testable at this budget"
+LEARN_SE = 2.0  # a curve learned when its gain exceeds this many standard errors over seeds
 CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
 SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
@@ -56,7 +58,7 @@ RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawd
 @dataclass(frozen=True)
 class Metric:
     """What a curve measures: its column, the level that counts as converged, the level a run
-    must exceed somewhere to count as having learned anything, and how evidence names reaching
+    must end above to count as having learned anything, and how evidence names reaching
     the threshold (formatted with it) and the final value."""
 
     column: str
@@ -75,7 +77,9 @@ SCORE = Metric("eval_success", 0.9, 0.05, "a {:.0%} score", "final score (share 
 
 def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y: str = "frac_opt") -> pd.DataFrame:
     """One row per run: steps to threshold (censored), whether it got there, final value of
-    ``y`` (column ``final``: a fraction of the optimum, a win rate or a return, as ``y`` is), its peak, and its largest drop below an earlier peak."""
+    ``y`` (column ``final``: a fraction of the optimum, a win rate or a return, as ``y`` is),
+    its initial value (the same share of the first evaluation points), its peak, and its largest
+    drop below an earlier peak."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
@@ -85,6 +89,7 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
+            "initial": float(run[y].iloc[:k].mean()),
             "final": float(run[y].iloc[-k:].mean()),
             "peak": float(run[y].max()),
             "drawdown": float((run[y].cummax() - run[y]).max()),
@@ -94,6 +99,7 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
 
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
+    gain = (runs["final"] - runs["initial"]).groupby(runs["label"], sort=False)
     return pd.DataFrame({
         "seeds": g.size(),
         "reached": g["reached"].sum().astype(int),
@@ -101,6 +107,9 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
         "steps_std": g["steps_to_threshold"].std(ddof=1).fillna(0.0),
         "final_mean": g["final"].mean(),
         "final_std": g["final"].std(ddof=1).fillna(0.0),
+        "initial_mean": g["initial"].mean(),
+        "gain_mean": gain.mean(),
+        "gain_se": gain.std(ddof=1) / np.sqrt(gain.size()),  # NaN with one seed
     })
 
 
@@ -205,13 +214,26 @@ def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric =
 
 # --- verdicts -------------------------------------------------------------------------------
 
+RULE = f"""How a verdict is decided (oapo_lite.verdicts), in this order:
+1. Not testable at this budget: a curve has fewer than 2 seeds, or did not learn (its final
+   level is not above its initial level by more than {LEARN_SE:g} standard errors of the gain over
+   seeds, or ends at or below the metric's floor: a 5% win rate or score), or, for "faster",
+   no seed of either curve reached the threshold.
+2. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
+   P(a better than b) (or of the final IQM, for "stays below" / "reaches") is on the claimed
+   side of 0.5 (of the threshold), contradicted when it is wholly on the other side,
+   direction only when just the point estimate is on the claimed side, not reproduced otherwise.
+3. "Faster" is not reproduced whenever fewer seeds of the faster-claimed curve reached the
+   threshold, whatever P says; the verdict then names the counts."""
+
+
 @dataclass(frozen=True)
 class Verdict:
     claim: str
-    status: str  # the interval rule (module docstring)
-    se_status: str  # the former two-standard-error rule, kept for comparison
+    status: str  # ``RULE``
     evidence: str
-    estimate: str  # the interval the status reads, e.g. "P(oappo better) 0.720 [0.400, 0.960]"
+    estimate: str  # the interval the status reads, e.g. "P(oappo faster) 0.720 [0.400, 0.960]"
+    reason: str  # one line: why this status
 
     @property
     def held(self) -> bool:
@@ -219,94 +241,87 @@ class Verdict:
 
     def sentence(self) -> str:
         if self.status == NOT_TESTABLE:
-            return f"{self.claim}: {self.status}: {self.evidence}"
-        return f"{self.claim}: {self.status} (two-standard-error rule: {self.se_status}). {self.evidence}"
+            return f"{self.claim}: {self.status}: {self.reason}"
+        return f"{self.claim}: {self.status} ({self.reason}). {self.evidence}"
 
 
-def _stderr(s: pd.DataFrame, label, col: str) -> float:
-    """Standard error over seeds; with one seed the noise is unknown, so nothing beats it."""
-    seeds = int(s.loc[label, "seeds"])
-    return float(s.loc[label, f"{col}_std"]) / np.sqrt(seeds) if seeds > 1 else np.inf
-
-
-NOISE_SE = 2.0  # the former rule: a difference must exceed this many combined standard errors
-
-
-def _se_status(diff: float, noise: float) -> str:
-    if diff > NOISE_SE * noise:
+def _side(est: Interval, value: float, claimed_above: bool) -> str:
+    """Interval rule for "the estimate is above ``value``" (or below, ``claimed_above=False``);
+    NaN bounds (one seed) never decide."""
+    sign = 1.0 if claimed_above else -1.0
+    low, high = sorted((sign * (est.low - value), sign * (est.high - value)))
+    if low > 0:
         return REPRODUCED
-    return DIRECTION if diff > 0 else NOT
+    if high < 0:
+        return CONTRADICTED
+    return DIRECTION if sign * (est.point - value) > 0 else NOT
 
 
-def _above(est: Interval, value: float) -> str:
-    """Interval rule for "the estimate exceeds ``value``" (NaN bounds never decide)."""
-    if est.low > value:
-        return REPRODUCED
-    return DIRECTION if est.point > value else NOT
+def _reason(status: str, estimate: str, side: str, value: float) -> str:
+    where = {REPRODUCED: f"wholly {side}", CONTRADICTED: f"wholly on the other side of {value:g}",
+             DIRECTION: f"point estimate {side}, interval across {value:g}", NOT: f"point estimate not {side}"}
+    return f"{estimate}: {where[status]}"
 
 
-def _pairwise(ev: Evidence, a, b, stat: str, claim: str, se_diff: float, se_noise: float,
-              evidence: str, veto: bool = False) -> Verdict:
+def _pairwise(ev: Evidence, a, b, stat: str, claim: str, evidence: str, veto: str = "") -> Verdict:
     p = ev.improvement(a, b, stat)
     word = {"steps": "faster", "final": "higher", "drawdown": "steadier"}[stat]
-    return Verdict(claim, NOT if veto else _above(p, 0.5), NOT if veto else _se_status(se_diff, se_noise),
-                   f"{evidence}; P({a} {word}) = {p.fmt()}.", f"P({a} {word}) {p.fmt()}")
+    estimate = f"P({a} {word}) {p.fmt()}"
+    if veto:
+        return Verdict(claim, NOT, f"{evidence}; P({a} {word}) = {p.fmt()}.", estimate, veto)
+    status = _side(p, 0.5, True)
+    return Verdict(claim, status, f"{evidence}; P({a} {word}) = {p.fmt()}.", estimate,
+                   _reason(status, estimate, "above 0.5", 0.5))
 
 
 def faster(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` reaches the threshold in fewer env steps than ``b``."""
-    s = ev.summary
+    s, reach = ev.summary, ev.metric.reach.format(ev.threshold)
+    veto = ""
+    if s.loc[a, "reached"] < s.loc[b, "reached"]:
+        veto = (f"fewer seeds of {a} reached {reach} ({s.loc[a, 'reached']}/{s.loc[a, 'seeds']} vs "
+                f"{s.loc[b, 'reached']}/{s.loc[b, 'seeds']}), so P(faster) cannot count")
     return _pairwise(ev, a, b, "steps", claim,
-                     se_diff=s.loc[b, "steps_mean"] - s.loc[a, "steps_mean"],
-                     se_noise=np.hypot(_stderr(s, a, "steps"), _stderr(s, b, "steps")),
-                     evidence=f"steps to {ev.metric.reach.format(ev.threshold)}, IQM [95% CI] over seeds: "
-                              f"{_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}",
-                     veto=s.loc[a, "reached"] < s.loc[b, "reached"])
+                     evidence=f"steps to {reach}, IQM [95% CI] over seeds: {_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}",
+                     veto=veto)
 
 
 def higher(ev: Evidence, a, b, claim: str) -> Verdict:
-    """Claim: ``a`` ends at a higher fraction of the optimum than ``b``."""
-    s = ev.summary
+    """Claim: ``a`` ends at a higher level (fraction of the optimum, win rate, return) than ``b``."""
     return _pairwise(ev, a, b, "final", claim,
-                     se_diff=s.loc[a, "final_mean"] - s.loc[b, "final_mean"],
-                     se_noise=np.hypot(_stderr(s, a, "final"), _stderr(s, b, "final")),
                      evidence=f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)} vs {_fmt_final(ev, b)}")
 
 
 def stabler(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` improves more steadily than ``b``: a smaller largest drop of its curve
     below an earlier peak."""
-    dd = ev.runs.groupby("label")["drawdown"]
-    mean, se = dd.mean(), dd.std(ddof=1) / np.sqrt(dd.size())
-    return _pairwise(ev, a, b, "drawdown", claim, se_diff=mean[b] - mean[a], se_noise=np.hypot(se[a], se[b]),
+    return _pairwise(ev, a, b, "drawdown", claim,
                      evidence=f"largest drop below an earlier peak, IQM [95% CI]: {a} {ev.level(a, 'drawdown').fmt()} "
                               f"vs {b} {ev.level(b, 'drawdown').fmt()}")
 
 
 def better(ev: Evidence, a, b, claim: str) -> Verdict:
-    """Claim: ``a`` is better than ``b``: higher at the end or, where both end within
-    ``FINAL_TIE`` of each other, faster to the threshold. The interval rule compares the final
-    IQMs to decide which, the former rule the final means."""
+    """Claim: ``a`` is better than ``b``: higher at the end or, where both final IQMs are within
+    ``FINAL_TIE`` of each other, faster to the threshold."""
     by_final, by_speed = higher(ev, a, b, claim), faster(ev, a, b, claim)
-    tie_iqm = abs(ev.level(a, "final").point - ev.level(b, "final").point) <= FINAL_TIE
-    tie_mean = abs(ev.summary.loc[a, "final_mean"] - ev.summary.loc[b, "final_mean"]) <= FINAL_TIE
-    chosen = by_speed if tie_iqm else by_final
-    evidence = by_final.evidence if not (tie_iqm or tie_mean) else f"{by_final.evidence[:-1]}; {by_speed.evidence}"
-    return Verdict(claim, chosen.status, (by_speed if tie_mean else by_final).se_status, evidence, chosen.estimate)
+    if abs(ev.level(a, "final").point - ev.level(b, "final").point) > FINAL_TIE:
+        return by_final
+    return Verdict(claim, by_speed.status, f"{by_final.evidence[:-1]} (a tie within {FINAL_TIE:g}, so speed "
+                   f"decides); {by_speed.evidence}", by_speed.estimate, by_speed.reason)
 
 
 def _single(ev: Evidence, a, claim: str, below: bool) -> Verdict:
     s, thr = ev.summary, ev.threshold
     est = ev.level(a, "final")
+    estimate = f"IQM final {est.fmt()}"
     if below:  # "stuck": the whole interval below the threshold
-        status = REPRODUCED if est.high < thr else DIRECTION if est.point < thr else NOT
-        se = _se_status(thr - s.loc[a, "final_mean"], _stderr(s, a, "final"))
+        status, side = _side(est, thr, False), f"below {thr:g}"
     else:  # "optimal": the whole interval at or above it
-        status = REPRODUCED if est.low >= thr else DIRECTION if est.point >= thr else NOT
-        se = _se_status(s.loc[a, "final_mean"] - thr + 1e-12, _stderr(s, a, "final"))
-    return Verdict(claim, status, se,
+        status = REPRODUCED if est.low >= thr else CONTRADICTED if est.high < thr else DIRECTION if est.point >= thr else NOT
+        side = f"at or above {thr:g}"
+    return Verdict(claim, status,
                    f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)}; {s.loc[a, 'reached']} of "
-                   f"{s.loc[a, 'seeds']} seeds ever reached {thr:.0%}.", f"IQM final {est.fmt()}")
+                   f"{s.loc[a, 'seeds']} seeds ever reached {thr:.0%}.", estimate, _reason(status, estimate, side, thr))
 
 
 def stuck(ev: Evidence, a, claim: str) -> Verdict:
@@ -329,26 +344,35 @@ def _fmt_final(ev: Evidence, label) -> str:
     return f"{label} {ev.level(label, 'final').fmt()} (mean {ev.summary.loc[label, 'final_mean']:.3f})"
 
 
+def learned(ev: Evidence, label) -> bool:
+    """Whether curve ``label`` learned at this budget (the module docstring's rule)."""
+    s = ev.summary.loc[label]
+    return bool(s["gain_mean"] > LEARN_SE * s["gain_se"] and s["gain_mean"] > 0
+                and ev.level(label, "final").point > ev.metric.floor)
+
+
 def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     """Why the data cannot decide a claim about ``labels``, or None if it can."""
     if ev is None:
-        return "no run of this env on disk at this budget."
-    s = ev.summary
+        return "no run of this env on disk at this budget"
+    s, m = ev.summary, ev.metric
     few = [f"{x} ({int(s.loc[x, 'seeds']) if x in s.index else 0})" for x in labels
            if x not in s.index or s.loc[x, "seeds"] < 2]
     if few:
-        return f"fewer than 2 seeds on disk: {', '.join(few)}."
-    m = ev.metric
-    if ev.runs.loc[ev.runs["label"].isin(labels), "peak"].max() <= m.floor:
-        return f"no run of {' or '.join(map(str, labels))} ever rose above {m.floor:g} ({m.column}): nothing learned yet."
+        return f"fewer than 2 seeds on disk: {', '.join(few)}"
+    idle = [f"{x} did not learn (initial {s.loc[x, 'initial_mean']:.3g}, final {s.loc[x, 'final_mean']:.3g}, "
+            f"gain {s.loc[x, 'gain_mean']:+.3g} +- {s.loc[x, 'gain_se']:.2g} s.e. over {s.loc[x, 'seeds']} seeds)"
+            for x in labels if not learned(ev, x)]
+    if idle:
+        return "; ".join(idle)
     if test is faster and not s.loc[list(labels), "reached"].any():
-        return f"no seed of {' or '.join(map(str, labels))} reached {m.reach.format(m.threshold)}."
+        return f"no seed of {' or '.join(map(str, labels))} reached {m.reach.format(m.threshold)}"
     return None
 
 
 def _check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     why = _undecidable(ev, test, labels)
-    return Verdict(claim, NOT_TESTABLE, NOT_TESTABLE, why, "") if why else test(ev, *labels, claim)
+    return Verdict(claim, NOT_TESTABLE, "", "", why) if why else test(ev, *labels, claim)
 
 
 def claims(figure, df: pd.DataFrame) -> list[Verdict]:
@@ -370,7 +394,7 @@ def claims(figure, df: pd.DataFrame) -> list[Verdict]:
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:
-    """Tidy: one row per (budget, claim) with the interval the verdict reads and both rules' verdicts."""
+    """Tidy: one row per (budget, claim) with the interval the verdict reads, the verdict and why."""
     return pd.DataFrame([{"budget": budget, "claim": v.claim, "estimate [95% CI]": v.estimate,
-                          "verdict": v.status, "2-SE rule": v.se_status}
+                          "verdict": v.status, "why": v.reason}
                          for budget, vs in verdicts_by_budget.items() for v in vs])

@@ -23,3 +23,17 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
     assert set(table["budget"]) == {"paper (5 seeds)"}
     assert (table["verdict"] == verdicts.REPRODUCED).all()  # every claim of Fig. 5b holds in this fake data
     assert len(table) == len(grid.get_figure("fig5b").claims)
+
+
+def test_the_readme_carries_the_claims_table_the_data_gives():
+    """The README's copy of the claims table is what the committed runs give today."""
+    block = claims.readme_block()
+    assert block == claims.markdown(claims.glance()), "the README's claims table is stale: run python -m oapo_lite.claims"
+    assert block.count("\n") == sum(len(f.claims) for f in grid.GRID) + 1  # a header, a rule, a row per claim
+
+
+def test_glance_budgets_are_shares_of_the_paper():
+    assert claims.budget_share("fig3b", None) == "240k steps x 5 seeds; our budget, the paper gives none"
+    assert claims.budget_share("fig6b", "grf:academy_3_vs_1_with_keeper") == \
+        "32k steps x 3 seeds = 0.13% of 25M (HARL's tuned GRF steps)"
+    assert claims.budget_share("fig4_smax", "smax:6h_vs_8z").startswith("not run at `cpu`")
