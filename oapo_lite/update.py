@@ -261,7 +261,10 @@ class Learner:
         detail for the history: the KL of every accepted trust-region step)."""
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
-        K = policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
+        # K feeds Eq. 9 only for OAPO; for the others it is a logged column, which the results
+        # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
+        K = (policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
+             if spec.reuse == "oapo" or cfg.evaluates(it + 1) else np.full((n, n), np.nan))
         M = reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.reuse_lambda, self.allowed)
         if cfg.reuse_adapt is not None:
             G = source_gradients(actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip,
