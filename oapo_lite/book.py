@@ -4,7 +4,8 @@ table of contents, and MathJax served from the site itself, so it works offline.
 
 Sphinx with MyST-NB (what Jupyter Book 1 is built on) does the rendering. The pages are the
 numbered notebooks present in ``notebooks/``, so new notebooks appear without editing
-anything; the map's rows link to them.
+anything; the map's rows link to them. The repository's notation and glossary
+(``GLOSSARY.md``) is a page of its own.
 
     python -m oapo_lite book [--out build/book]
 """
@@ -78,7 +79,8 @@ def index_page(rows: list[tuple[str, str, str]], paths: list[Path]) -> str:
     absent = [(what, stem) for what, stem, _ in rows if stem not in {p.stem for p in paths}]
     if absent:
         lines += ["## In the map, without a notebook here", ""] + [f"* {what}: {stem}" for what, stem in absent] + [""]
-    lines += ["```{toctree}", ":hidden:", ":caption: Notebooks", ""] + [f"notebooks/{p.stem}" for p in paths]
+    lines += ["The symbols and the repository's own words are in [the notation and glossary](glossary.md).", ""]
+    lines += ["```{toctree}", ":hidden:", ":caption: Notebooks", "", "glossary"] + [f"notebooks/{p.stem}" for p in paths]
     return "\n".join(lines + ["```", ""])
 
 
@@ -102,6 +104,7 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     paths = notebook_paths() if notebooks == NOTEBOOKS else sorted(Path(notebooks).glob("[0-9]*.ipynb"))
     for path in paths:
         shutil.copy2(path, src / "notebooks" / path.name)
+    shutil.copy2(ROOT / "GLOSSARY.md", src / "glossary.md")
     (src / "conf.py").write_text(CONF)
     (src / "index.md").write_text(index_page(overview_map(Path(notebooks) / f"{OVERVIEW}.ipynb"), paths))
     shutil.copytree(mathjax_dir(), src / "_static" / "mathjax")

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
-YLABELS = {"frac_opt": "return / oracle optimum (below 0: worse than doing nothing)",
+YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arrival rewards)",
            "eval_return": "episode return (evaluation)", "eval_success": "win rate"}
 # One colour per algorithm and per agent in every figure. The agents are named after their
 # colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.

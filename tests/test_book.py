@@ -76,7 +76,7 @@ def browser():
 
 
 def _pages(root: Path) -> list[str]:
-    return ["index.html"] + sorted(f"notebooks/{p.name}" for p in (root / "notebooks").glob("*.html"))
+    return ["index.html", "glossary.html"] + sorted(f"notebooks/{p.name}" for p in (root / "notebooks").glob("*.html"))
 
 
 def test_every_notebook_has_a_page_and_the_front_page_links_them(site):
@@ -88,6 +88,7 @@ def test_every_notebook_has_a_page_and_the_front_page_links_them(site):
     front = (root / "index.html").read_text()
     for stem in stems:
         assert f'href="notebooks/{stem}.html' in front
+    assert 'href="glossary.html' in front and "K_{ij}" in (root / "glossary.html").read_text()
     pages = [(root / page).read_text() for page in _pages(root)]
     assert not [page for page in pages if "https://" in page and "<script" in page.split("https://")[0][-200:]]
     assert any('src="../_static/mathjax/tex-mml-chtml.js' in page for page in pages)  # no CDN
