@@ -20,6 +20,8 @@ class Budget:
     eval_every: int  # iterations between evaluations
     eval_episodes: int
     config: dict = field(default_factory=dict)  # further TrainConfig fields (batch shape, episode length)
+    figures: tuple[str, ...] | None = None  # the figures trained at this budget (None: every one)
+    notebooks: tuple[str, ...] | None = None  # number prefixes of the notebooks run at it (None: all)
 
 
 BUDGETS = {
@@ -31,6 +33,12 @@ BUDGETS = {
 # fits a CPU, so for them it is the paper budget (same runs, same cache); the real engines
 # override it per figure (``Figure.budgets``) with what fits in one or two hours.
 BUDGETS["cpu"] = BUDGETS["paper"]
+# "student": what a laptop runs in about five minutes and still shows the two findings to see
+# with one's own eyes: MAPPO trapped at 0.216 on Black-Red while OAPPO reaches the optimum
+# (Fig. 3b), and the lambda trap (Fig. 3d). By 120k steps every committed seed 0-2 is there.
+BUDGETS["student"] = Budget(seeds=(0, 1, 2), steps=120_000, eval_every=2, eval_episodes=32,
+                            figures=("fig3b", "fig3c", "fig3d"),
+                            notebooks=("00", "01", "02", "03", "04", "05", "10", "11", "12"))
 COMMITTED = ("paper", "cpu")  # the budgets whose figures and runs are committed under figures/
 # paper20's figures go to figures/paper20/, but its runs share the committed cache: a run id
 # hashes the run's whole config, so its seeds 0-4 are the paper budget's runs, trained once.
@@ -280,8 +288,8 @@ class Run:
 def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
     """A figure's runs at a budget: curve by curve, seed by seed."""
     fig = get_figure(figure)
-    get_budget(budget)  # a bad name fails here, even for a figure without runs at it
-    if fig.runs_at is not None and budget not in fig.runs_at:
+    trained = get_budget(budget).figures  # a bad name fails here, even for a figure without runs at it
+    if (fig.runs_at is not None and budget not in fig.runs_at) or (trained is not None and fig.id not in trained):
         return []
     envs, runs = fig.envs(budget), []
     for label, kw in fig.curves:

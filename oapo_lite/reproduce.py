@@ -17,8 +17,11 @@ ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = ROOT / "notebooks"
 
 
-def notebook_paths() -> list[Path]:
-    return sorted(NOTEBOOKS.glob("[0-9]*.ipynb"))
+def notebook_paths(budget: str | None = None) -> list[Path]:
+    """The numbered notebooks, or those a budget runs (``Budget.notebooks``)."""
+    paths = sorted(NOTEBOOKS.glob("[0-9]*.ipynb"))
+    wanted = None if budget is None else grid.get_budget(budget).notebooks
+    return paths if wanted is None else [p for p in paths if p.name.split("_")[0] in wanted]
 
 
 def takes_budget(path: Path) -> bool:
@@ -103,7 +106,7 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = notebook_paths()
+    paths = notebook_paths(budget)
     timings = {}
     with ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_timed_run, path, out_dir / path.name,
