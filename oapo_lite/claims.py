@@ -46,7 +46,8 @@ def budget_share(figure, env: str | None, budget: str = "cpu") -> str:
     if fig.envs(budget) is not None and env not in fig.envs(budget):
         return f"not run at `{budget}` (the `paper` budget: {_steps(fig.budget('paper', env).steps)} steps)"
     b = fig.budget(budget, env)
-    run = f"{_steps(b.steps)} steps x {len(b.seeds)} seed{'s' * (len(b.seeds) > 1)}"
+    seeds = len(b.seeds) if fig.seeds is None else min(fig.seeds, len(b.seeds))
+    run = f"{_steps(b.steps)} steps x {seeds} seed{'s' * (seeds > 1)}"
     if not fig.reference:
         return f"{run}; our budget, the paper gives none"
     paper = fig.budget("paper", env).steps

@@ -11,36 +11,40 @@ YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arri
 # One colour per algorithm and per agent in every figure. The agents are named after their
 # colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
 ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
-               "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf"}
+               "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
+               "oappo adaptive": "#145214"}
 AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
 
 
 def color_of(label, order=None):
-    """The colour of a curve: its algorithm's (the first word of the label, any case: "OAPPO",
-    "oappo adaptive"), else the label's place in ``order`` on a sequential map (a sigma, a lambda,
-    a reuse scheme), else None (matplotlib's next colour)."""
-    word = str(label).split()[0].lower() if str(label).strip() else ""
-    if word in ALGO_COLORS:
-        return ALGO_COLORS[word]
+    """The colour of a curve: its algorithm's (the label, or its first word, any case: "OAPPO",
+    "oappo lambda=0.4"; the adaptive rule has its own), else the label's place in ``order`` on a
+    sequential map (a sigma, a lambda, a reuse scheme), else None (matplotlib's next colour)."""
+    name = str(label).lower()
+    for key in (name, name.split()[0] if name.strip() else ""):
+        if key in ALGO_COLORS:
+            return ALGO_COLORS[key]
     if order is not None and label in list(order):
         k, n = list(order).index(label), len(order)
         return plt.cm.viridis(0.1 + 0.75 * k / max(n - 1, 1))
     return None
 
 
-def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None):
+def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None,
+                    colors: dict | None = None):
     """Fig. 3b-d, 4, App. A: every seed as a thin line and the interquartile mean over seeds
     (bold) of ``y`` against env steps. Per-seed lines rather than mean +- std: outcomes that
     split into trapped and optimal seeds have a mean that describes no run and a band that
-    leaves the possible range. The title gets a line saying so."""
+    leaves the possible range. The title gets a line saying so. ``colors``: label -> colour,
+    where a figure needs its own (else ``color_of``)."""
     from oapo_lite.verdicts import iqm
 
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     for label in order:
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)
-        color = color_of(label, order)
+        color = (colors or {}).get(label) or color_of(label, order)
         line, = ax.plot(runs.index, iqm(runs.to_numpy(float), axis=1), lw=2.2, label=str(label), color=color)
         ax.plot(runs.index, runs.to_numpy(float), lw=0.6, alpha=0.35, color=line.get_color())
     if y == "frac_opt":

@@ -370,7 +370,9 @@ def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     return None
 
 
-def _check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
+def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
+    """``test(ev, *labels, claim)`` if the data can decide it (``RULE``, step 1), else a
+    ``NOT_TESTABLE`` verdict saying why: for claims a notebook makes beyond the grid's."""
     why = _undecidable(ev, test, labels)
     return Verdict(claim, NOT_TESTABLE, "", "", why) if why else test(ev, *labels, claim)
 
@@ -388,9 +390,9 @@ def claims(figure, df: pd.DataFrame) -> list[Verdict]:
     if fig.claims_per_env:  # claims per map or scenario, each judged on that env's runs
         envs = df["env"].str.removeprefix(fig.claims_per_env) if len(df) else pd.Series(dtype=str)
         evidence = {e: Evidence(df[envs == e], metric=fig.metric) for e in set(envs)}
-        return [_check(evidence.get(e), test, labels, claim) for e, test, labels, claim in fig.claims]
+        return [check(evidence.get(e), test, labels, claim) for e, test, labels, claim in fig.claims]
     ev = Evidence(df, metric=fig.metric) if len(df) else None
-    return [_check(ev, test, labels, claim) for test, labels, claim in fig.claims]
+    return [check(ev, test, labels, claim) for test, labels, claim in fig.claims]
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:
