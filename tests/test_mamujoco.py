@@ -1,4 +1,5 @@
 """Multi-agent MuJoCo through the env registry: names, spaces, action bounds, resume, training."""
+import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
@@ -33,11 +34,13 @@ def test_actions_reach_the_engine_inside_the_box_even_from_extreme_policies():
     vec = registry.make_vec(CHEETAH, n_envs=2, seed=0, max_steps=30)
     space = vec.envs[0].action_space(vec.agents[0])
     sent = []
-    for env in vec.envs:  # a spy at the env boundary: what every copy's step receives
-        def spy(actions, _step=env.step):
-            sent.append(np.stack([actions[a] for a in vec.agents]))
-            return _step(actions)
-        env.step = spy
+    for env in vec.envs:  # a spy at the engine boundary: the robot action every copy's MuJoCo env receives
+        robot = env.single_agent_env
+
+        def spy(action, _step=robot.step):
+            sent.append(np.array(action))
+            return _step(action)
+        robot.step = spy
     gen = torch.Generator().manual_seed(0)
     actors = Actors(2, vec.obs_dim, vec.n_actions, (8,), continuous=True, gen=gen)
     with torch.no_grad():  # means of +-50 (far outside [-1, 1]) in alternating dimensions
@@ -45,10 +48,33 @@ def test_actions_reach_the_engine_inside_the_box_even_from_extreme_policies():
             actors.weights[k][-2].copy_(torch.tensor([50.0, -50.0, 50.0]))
     batch, _ = collect(vec, vec.reset(), actors, [0, 1], 10, gen)
     sent = np.stack(sent)
-    assert sent.shape == (20, 2, 3)
+    assert sent.shape == (20, 6)  # two agents' three joints each, in the robot's order
     assert (batch.act.abs() > 10).all()  # the policy's own actions are far out of bounds
-    assert (sent >= space.low).all() and (sent <= space.high).all() and sent.dtype == space.dtype
-    np.testing.assert_array_equal(sent, np.broadcast_to([1.0, -1.0, 1.0], sent.shape))
+    assert (sent >= space.low[0]).all() and (sent <= space.high[0]).all()
+    np.testing.assert_array_equal(sent, np.broadcast_to([1.0, -1.0, 1.0, 1.0, -1.0, 1.0], sent.shape))
+
+
+@pytest.mark.parametrize("name", ["HalfCheetah-2x3", "Hopper-3x1"])
+def test_the_direct_step_equals_pettingzoo_step_bit_for_bit(name):
+    """MaMuJoCoVec steps the robot's MuJoCo env and gathers the agents' observations; the
+    generic PettingZooVec goes through MaMuJoCo's own step. Same actions, same numbers,
+    across episode ends (max_steps 30) and on a partition with unequal observations."""
+    from oapo_lite.envs.mamujoco import env_fn
+    from oapo_lite.envs.pettingzoo_vec import PettingZooVec
+
+    fast = registry.make_vec(f"mamujoco:{name}", n_envs=3, seed=4, max_steps=30)
+    slow = PettingZooVec(env_fn(name, 30), n_envs=3, seed=4, max_steps=30)
+    steps = [fast.reset(), slow.reset()]
+    rng = np.random.default_rng(1)
+    ends = 0
+    for _ in range(70):
+        actions = rng.uniform(-1.5, 1.5, (3, fast.n_agents, fast.n_actions)).astype(np.float32)
+        steps = [fast.step(actions), slow.step(actions)]
+        for field in dataclasses.fields(steps[0]):
+            np.testing.assert_array_equal(getattr(steps[0], field.name), getattr(steps[1], field.name),
+                                          err_msg=field.name)
+        ends += int(np.isfinite(steps[0].episode_return).sum())
+    assert ends >= 6  # every copy ended (and was reset) at least twice: at step 30 and step 60
 
 
 def test_get_state_set_state_continues_bit_exactly():

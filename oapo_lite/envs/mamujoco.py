@@ -19,8 +19,10 @@ import io
 import os
 import sys
 
+import numpy as np
 
 from .pettingzoo_vec import PettingZooVec
+from .vec import VecStep
 
 # name -> equal spaces for every agent (checked against the engine by the tests)
 PARTITIONS: dict[str, bool] = {
@@ -79,8 +81,65 @@ def env_fn(name: str, max_steps: int):
 
 
 class MaMuJoCoVec(PettingZooVec):
-    """``PettingZooVec`` whose checkpoints hold every copy's MuJoCo data, random generator and
-    time-limit counter: MaMuJoCo envs keep lambdas and cannot be pickled whole."""
+    """``PettingZooVec`` that steps each copy's single-agent MuJoCo env directly, and whose
+    checkpoints hold every copy's MuJoCo data, random generator and time-limit counter
+    (MaMuJoCo envs keep lambdas and cannot be pickled whole).
+
+    MaMuJoCo's own ``step`` rebuilds every agent's observation from the MuJoCo data, joint by
+    joint, in Python; yet an agent's observation is a fixed selection of the single-agent
+    observation (its ``observation_factorization``, checked by the tests), and every agent gets
+    the robot's reward. Stepping the single-agent env and gathering those indices for all
+    copies at once gives the same numbers bit for bit (tested against ``PettingZooVec``; a run
+    trains identically) at about twice the speed (``benchmarks/mamujoco_speed.py``).
+    """
+
+    def __init__(self, env_fn, n_envs: int, seed: int = 0, max_steps: int | None = None):
+        super().__init__(env_fn, n_envs, seed=seed, max_steps=max_steps)
+        first = self.envs[0]
+        self._obs_index = [np.asarray(first.observation_factorization[a]) for a in self.agents]
+        act = np.array([[part.act_ids for part in parts] for parts in first.agent_action_partitions])
+        if act.shape != (self.n_agents, self.n_actions) or sorted(act.ravel()) != list(range(act.size)):
+            raise ValueError(f"MaMuJoCo's action partition {act.tolist()} does not split the robot's actions")
+        self._act_index = act.ravel()  # agent-major local action k -> the robot's action index
+        space = self.spaces[0][1]
+        self._low, self._high, self._dtype = space.low, space.high, space.dtype
+
+    def step(self, actions) -> VecStep:
+        """``actions`` (N, n, D) floats, clipped to the agents' bounds as ``PettingZooVec`` does."""
+        N = self.n_envs
+        local = np.clip(np.asarray(actions), self._low, self._high).astype(self._dtype).reshape(N, -1)
+        robot = np.empty((N, local.shape[1]), np.float64)  # MaMuJoCo builds a float64 action too
+        robot[:, self._act_index] = local
+        states = np.empty((N, self.state_dim), np.float64)
+        final_states = np.empty_like(states)
+        reward = np.zeros(N, np.float32)
+        terminated, truncated = np.zeros(N, bool), np.zeros(N, bool)
+        ep_return, ep_success = np.full(N, np.nan, np.float32), np.full(N, np.nan, np.float32)
+        for e, env in enumerate(self.envs):
+            state, r, term, trunc, _ = env.single_agent_env.step(robot[e])
+            reward[e] = r
+            self._t[e] += 1
+            self._returns[e] += r
+            terminated[e] = term
+            truncated[e] = not term and (trunc or (self.max_steps is not None and self._t[e] >= self.max_steps))
+            final_states[e] = state
+            if term or truncated[e]:
+                ep_return[e] = self._returns[e]
+                self._reset_copy(e, None)
+                state = env.state()
+            states[e] = state
+        return VecStep(obs=self._local(states), state=states.astype(np.float32), avail=np.ones(
+                           (N, self.n_agents, self.n_actions), bool), reward=reward, terminated=terminated,
+                       truncated=truncated, final_obs=self._local(final_states),
+                       final_state=final_states.astype(np.float32), episode_return=ep_return,
+                       episode_success=ep_success, active=np.ones((N, self.n_agents), bool))
+
+    def _local(self, states: np.ndarray) -> np.ndarray:
+        """Every agent's observation of every copy, zero-padded as ``PettingZooVec`` pads."""
+        obs = np.zeros((len(states), self.n_agents, self.obs_dim), np.float32)
+        for k, index in enumerate(self._obs_index):
+            obs[:, k, :len(index)] = states[:, index]
+        return obs
 
     def get_state(self) -> dict:
         return {"copies": [_copy_state(env) for env in self.envs], "t": self._t.copy(),
