@@ -231,7 +231,7 @@ GRID = (
            runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100)),
                # 1M steps: 10% of HARL's scale, where every curve has left its initial return (at 200k
-               # MAPPO and SEAC had not left their initial return); an evaluation every 20
+               # MAPPO and SEAC had not); an evaluation every 20
                # iterations (40k steps) costs about 7% of the run
                "cpu": dict(steps=1_000_000, eval_every=20, eval_episodes=3,
                            config=dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)),
