@@ -102,6 +102,11 @@ class TrainConfig:
     seac_lambda: float = 1.0  # weight of the other agents' importance-weighted terms
     seps_clusters: int | None = None  # None: the best Davies-Bouldin index over 2..n-1
     seps_pretrain_steps: int = 20_000  # env steps on one shared network before clustering; part of ``steps``
+    # Issue 22's SMAX settings (fields added last, at defaults that keep every committed run as it was)
+    # lr, critic_lr (and a2c_lr) fall linearly over the run: iteration it (0-based) of N uses
+    # lr * (1 - it / N), as JaxMARL's ANNEAL_LR; after the last iteration the rate is 0
+    lr_anneal: bool = False
+    value_norm: bool = True  # the critic regresses on running-normalised targets (HARL's ValueNorm)
 
     def __post_init__(self):
         def need(ok: bool, name: str, allowed: str):
@@ -142,6 +147,8 @@ class TrainConfig:
         real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
         need(self.kl_reduce in ("max", "mean"), "kl_reduce", "['max', 'mean']")
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
+        for name in ("lr_anneal", "value_norm"):
+            need(isinstance(getattr(self, name), (bool, np.bool_)), name, "True or False")
         for name in ("shared", "bootstrap_truncation"):
             need(getattr(self, name) is None or isinstance(getattr(self, name), (bool, np.bool_)), name,
                  "None, True or False")
@@ -196,6 +203,11 @@ class TrainConfig:
     @property
     def n_iterations(self) -> int:
         return self.steps // self.iteration_steps
+
+    def lr_scale(self, iteration: int) -> float:
+        """The factor on every learning rate in iteration ``iteration`` (0-based): 1 without
+        ``lr_anneal``, else 1 - iteration / n_iterations (0 once the run is over)."""
+        return 1.0 - min(iteration, self.n_iterations) / self.n_iterations if self.lr_anneal else 1.0
 
     def evaluates(self, iteration: int) -> bool:
         """Whether the run is evaluated after ``iteration`` iterations (0: before the first)."""

@@ -172,14 +172,16 @@ class ValueNorm(nn.Module):
     """Running mean / variance of the value targets (HARL's ValueNorm: debiased EMA,
     beta 0.99999, variance floored at 1e-2), so the critic regresses on unit-scale targets."""
 
-    def __init__(self, beta: float = 0.99999, var_floor: float = 1e-2):
+    def __init__(self, beta: float = 0.99999, var_floor: float = 1e-2, enabled: bool = True):
         super().__init__()
-        self.beta, self.var_floor = beta, var_floor
+        self.beta, self.var_floor, self.enabled = beta, var_floor, enabled  # disabled: the identity
         self.register_buffer("mean", torch.zeros((), dtype=torch.float64))
         self.register_buffer("mean_sq", torch.zeros((), dtype=torch.float64))
         self.register_buffer("debias", torch.zeros((), dtype=torch.float64))
 
     def update(self, x: torch.Tensor) -> None:
+        if not self.enabled:
+            return
         x = x.double()
         self.mean.mul_(self.beta).add_((1 - self.beta) * x.mean())
         self.mean_sq.mul_(self.beta).add_((1 - self.beta) * x.pow(2).mean())
@@ -192,9 +194,13 @@ class ValueNorm(nn.Module):
         return mean, var.sqrt()
 
     def normalize(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.enabled:
+            return x
         mean, std = self._stats()
         return ((x - mean) / std).to(x.dtype)
 
     def denormalize(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.enabled:
+            return x
         mean, std = self._stats()
         return (x * std + mean).to(x.dtype)

@@ -147,6 +147,9 @@ def check_resumable(cfg: TrainConfig, ck: dict) -> None:
     if stale:
         raise ValueError(f"checkpoint's environment step has no fields {stale} (written by an older oapo_lite); "
                          f"{START_AFRESH}")
+    if cfg.lr_anneal and str(now["steps"]) != str(saved["steps"]) and ck["iteration"] > 0:
+        raise ValueError(f"checkpoint was written with steps = {saved['steps']}, and with lr_anneal the learning rate's "
+                         f"schedule depends on steps, so it cannot continue with steps = {cfg.steps}; {START_AFRESH}")
     if ck["iteration"] > cfg.n_iterations:
         raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
                          f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}; "

@@ -248,7 +248,7 @@ class Learner:
             reuse.check_spaces(env, np.ones((n, n), bool) if self.allowed is None else self.allowed)
         # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
-        self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm()
+        self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm(enabled=cfg.value_norm)
         # one optimiser per net: Adam would move a net that got no gradient through its momentum;
         # trust-region algorithms step by hand. foreach: the same per-tensor kernels, looped in C++
         self.actor_opts = [] if self.spec.trust_region else [
@@ -260,6 +260,10 @@ class Learner:
         """Iteration ``it``'s update on ``batch``: (metrics for the results rows, per-iteration
         detail for the history: the KL of every accepted trust-region step)."""
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
+        if cfg.lr_anneal:  # set every iteration from the config: a resumed run continues the same schedule
+            for opt, lr in [(o, cfg.lr) for o in self.actor_opts] + [(self.critic_opt, cfg.critic_lr)]:
+                for group in opt.param_groups:
+                    group["lr"] = lr * cfg.lr_scale(it)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
         # K feeds Eq. 9 only for OAPO; for the others it is a logged column, which the results
         # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
@@ -287,7 +291,7 @@ class Learner:
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
             metrics["agreement"] = np.round(C, 6)
-        return metrics, {"trpo_kls": trpo_kls}
+        return metrics, {"trpo_kls": trpo_kls, **({"lr_scale": cfg.lr_scale(it)} if cfg.lr_anneal else {})}
 
     def state_dict(self) -> dict:
         return {"critic": self.critic.state_dict(), "value_norm": self.value_norm.state_dict(),

@@ -105,3 +105,26 @@ def test_oappo_trains_end_to_end_and_resumes_identically(env, tmp_path):
     resumed = train(TrainConfig(steps=3 * N * 10, **cfg), tmp_path / "split", progress=False)
     cols = ["step", "eval_return", "eval_success", "objective", "value_loss"]
     assert resumed[cols].equals(full[cols])
+
+
+def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_path):
+    """Issue 22's ``grid.SMAX_TUNED`` (used by no committed run yet) is a valid config for every
+    algorithm of Fig. 4, and a MAPPO run with it (4 minibatches) resumes to the same numbers."""
+    from oapo_lite import grid
+
+    for algo in grid.SMAX_ALGOS:
+        TrainConfig(algo=algo, env="smax:3m", **grid.SMAX_BATCH, **grid.SMAX_TUNED)
+    cfg = TrainConfig(**{**grid.SMAX_TUNED, **dict(algo="mappo", env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10,
+                                                    eval_every=1, eval_episodes=N, max_steps=MAX_STEPS, checkpoint_every=1,
+                                                    hidden=(16,))})
+    full = train(cfg, tmp_path / "full", progress=False)
+
+    def crash(metrics):
+        if metrics["iteration"] == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "split", progress=False, callback=crash)
+    resumed = train(cfg, tmp_path / "split", progress=False)
+    cols = ["step", "eval_return", "eval_success", "objective", "value_loss"]
+    assert resumed[cols].equals(full[cols])

@@ -468,3 +468,49 @@ def test_samples_of_an_agent_that_left_change_neither_k_nor_any_update(tmp_path,
     rows = _run(tmp_path, algo, algo=algo, env_fn=lambda: Toy(leave=2), n_envs=2, rollout_len=10, steps=40,
                 eval_episodes=2)
     assert np.isfinite(rows["eval_return"]).all()
+
+
+# issue 22: the SMAX settings' options (lr_anneal, value_norm), at defaults that change nothing
+def test_lr_anneal_falls_linearly_to_zero_and_sets_every_optimiser(tmp_path):
+    cfg = TrainConfig(algo="mappo", steps=160 * 4, lr_anneal=True, **TINY)
+    assert [cfg.lr_scale(it) for it in range(5)] == [1.0, 0.75, 0.5, 0.25, 0.0]
+    assert TrainConfig(algo="mappo", steps=160 * 4, **TINY).lr_scale(3) == 1.0  # off by default
+    train(cfg, tmp_path / "run", progress=False)
+    assert [h["lr_scale"] for h in load_history(tmp_path / "run")] == [1.0, 0.75, 0.5, 0.25]
+    ck = load_checkpoint(tmp_path / "run")  # the optimisers as the last iteration left them: lr / 4
+    assert ck["actor_opt0"]["param_groups"][0]["lr"] == pytest.approx(cfg.lr / 4)
+    assert ck["critic_opt"]["param_groups"][0]["lr"] == pytest.approx(cfg.critic_lr / 4)
+    assert not _same(_params(tmp_path, "run"),
+                     (_run(tmp_path, "const", algo="mappo", steps=160 * 4, **TINY), _params(tmp_path, "const"))[1])
+    seac = TrainConfig(algo="seac", steps=80 * 3, lr_anneal=True, **{**TINY, "rollout_len": 5})
+    train(seac, tmp_path / "seac", progress=False)
+    assert [h["lr_scale"] for h in load_history(tmp_path / "seac")][-1] == pytest.approx(1 / seac.n_iterations)
+    opt = load_checkpoint(tmp_path / "seac")["a2c"]["a2c"]["opts"][0]
+    assert opt["param_groups"][0]["lr"] == pytest.approx(seac.a2c_lr / seac.n_iterations)
+
+
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo"])
+def test_annealed_run_without_value_norm_resumes_to_the_uninterrupted_numbers(tmp_path, algo):
+    cfg = TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, lr_anneal=True, value_norm=False, **TINY)
+    full = train(cfg, tmp_path / "full", progress=False)
+
+    def crash(metrics):
+        if metrics["iteration"] == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
+    # the schedule depends on steps: an annealed run cannot be extended
+    with pytest.raises(ValueError, match="lr_anneal"):
+        train(dataclasses.replace(cfg, steps=160 * 9), tmp_path / "full", progress=False)
+
+
+def test_value_norm_off_regresses_on_raw_returns(tmp_path):
+    on = _run(tmp_path, "on", algo="mappo", steps=160 * 3, **TINY)
+    off = _run(tmp_path, "off", algo="mappo", steps=160 * 3, value_norm=False, **TINY)
+    assert load_checkpoint(tmp_path / "off")["value_norm"]["debias"] == 0  # never updated
+    assert load_checkpoint(tmp_path / "on")["value_norm"]["debias"] > 0
+    assert not np.allclose(on["value_loss"].iloc[1:], off["value_loss"].iloc[1:])
+    with pytest.raises(ValueError, match="lr_anneal"):
+        TrainConfig(lr_anneal=1)
