@@ -7,9 +7,9 @@ Our side (this script)::
 
     .venv/bin/python benchmarks/smax_anchor.py --map 3m --seeds 0 1            # 300k steps
     .venv/bin/python benchmarks/smax_anchor.py --map 2s3z --seeds 0 1 2        # 500k steps
-    .venv/bin/python benchmarks/smax_anchor.py --map 3m --settings committed   # the committed cpu grid's settings
+    .venv/bin/python benchmarks/smax_anchor.py --map 3m --settings defaults    # TrainConfig's (HARL's) defaults
 
-trains MAPPO with ``grid.SMAX_TUNED`` (or the committed grid's settings) at Fig. 4's batch shape
+trains MAPPO with ``grid.SMAX_TUNED`` (Fig. 4's settings; or TrainConfig's defaults) at Fig. 4's batch shape
 into a temporary folder and prints, per seed, the evaluation win rate (64 battles, stochastic
 policy) at every evaluation and the CPU seconds per 1,000 env steps (this process, all threads,
 JAX compile included).
@@ -44,9 +44,9 @@ JaxMARL's side (by hand; its 300k-step 3m run costs about 100 CPU-seconds here):
    ``JAX_PLATFORMS=cpu``. Time it with ``/usr/bin/time -v`` (user + system seconds / env steps
    x 1,000 gives its CPU-s per 1,000 steps).
 
-Measured so (issue 22, 2 cores): 3m 0.72 at 295k (2 seeds), 2s3z 0.97 at 500k (5 seeds; no wins
-before ~150k, 0.51 at 254k, 0.80 at 303k, 0.96 at 401k); 0.32 (3m) and 0.52 (2s3z) CPU-s per
-1,000 env steps. The two win rates differ in kind: JaxMARL's is over its training episodes,
+Measured so (issue 22, 2 cores): the win rates of ``grid.SMAX_ANCHOR`` (on 2s3z no wins before
+~150k, 0.51 at 254k, 0.80 at 303k, 0.96 at 401k); 0.32 (3m) and 0.52 (2s3z) CPU-s per 1,000 env
+steps. The two win rates differ in kind: JaxMARL's is over its training episodes,
 ours over 64 evaluation battles; both policies act stochastically.
 """
 from __future__ import annotations
@@ -65,8 +65,8 @@ STEPS = {"3m": 300_000, "2s3z": 500_000}
 
 def config(map_name: str, seed: int, settings: str = "tuned", algo: str = "mappo") -> TrainConfig:
     """MAPPO (or ``algo``) on ``map_name`` at Fig. 4's batch shape, evaluated every ~32k steps
-    on 64 battles, with ``grid.SMAX_TUNED`` or the committed cpu grid's settings."""
-    kw = dict(grid.SMAX_BATCH, **grid.SMAX_MAP_SETTINGS[map_name])
+    on 64 battles, with ``grid.SMAX_TUNED`` or TrainConfig's defaults."""
+    kw = dict(grid.SMAX_BATCH)
     if settings == "tuned":
         kw.update(grid.SMAX_TUNED)
     every = max(1, round(32_000 / (kw["n_envs"] * kw["rollout_len"])))
@@ -76,10 +76,10 @@ def config(map_name: str, seed: int, settings: str = "tuned", algo: str = "mappo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", default="3m", choices=sorted(grid.SMAX_MAP_SETTINGS))
+    ap.add_argument("--map", default="3m", choices=grid.SMAX_MAPS)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--algo", default="mappo")
-    ap.add_argument("--settings", default="tuned", choices=["tuned", "committed"])
+    ap.add_argument("--settings", default="tuned", choices=["tuned", "defaults"])
     ap.add_argument("--steps", type=int, default=None, help="env steps (default: 300k on 3m, 500k on 2s3z)")
     args = ap.parse_args()
     for seed in args.seeds:

@@ -113,7 +113,7 @@ def project_grid(iterations: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--map", default="3m", help=f"one of {list(grid.SMAX_MAP_SETTINGS)}")
+    parser.add_argument("--map", default="3m", choices=grid.SMAX_MAPS)
     parser.add_argument("--algos", nargs="+", default=list(grid.SMAX_ALGOS))
     parser.add_argument("--iterations", type=int, default=6)
     parser.add_argument("--grid", action="store_true", help="project the cpu budget's CPU hours instead")
