@@ -16,3 +16,18 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
                        "git_rev": "test", **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))
     return df
+
+
+def interrupt(cfg, out, at: int) -> None:
+    """Train ``cfg`` into ``out`` and stop it as a Ctrl-C would, right after iteration ``at``
+    (what a resumed run must continue from)."""
+    import pytest
+
+    from oapo_lite.train import train
+
+    def crash(metrics):
+        if metrics["iteration"] == at:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, out, progress=False, callback=crash)

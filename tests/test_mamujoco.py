@@ -12,6 +12,8 @@ from oapo_lite.rollout import collect
 from oapo_lite.runstate import load_checkpoint
 from oapo_lite.train import train
 
+import fakes
+
 CHEETAH = "mamujoco:HalfCheetah-2x3"
 TINY = dict(env=CHEETAH, n_envs=2, rollout_len=20, max_steps=30, eval_every=1, eval_episodes=2)
 
@@ -106,12 +108,7 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path):
     cfg = TrainConfig(algo="oappo", steps=200, checkpoint_every=2, **TINY)
     full = train(cfg, tmp_path / "full", progress=False)
 
-    def crash(metrics):
-        if metrics["iteration"] == 3:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    fakes.interrupt(cfg, tmp_path / "resumed", at=3)
     assert load_checkpoint(tmp_path / "resumed")["iteration"] == 2
     pd.testing.assert_frame_equal(full, train(cfg, tmp_path / "resumed", progress=False))
 

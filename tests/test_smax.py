@@ -16,6 +16,8 @@ from oapo_lite.config import TrainConfig  # noqa: E402
 from oapo_lite.rollout import sample_actions  # noqa: E402
 from oapo_lite.train import train  # noqa: E402
 
+import fakes
+
 N, MAX_STEPS = 16, 40
 UNIT_FEATURES = 10  # SMAX's world state: 10 features per unit (health first), then teams and types
 MOVE_EAST = 1  # a move that brings 3m's allies into range (found by trying the four moves)
@@ -119,12 +121,7 @@ def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_
                                                     hidden=(16,))})
     full = train(cfg, tmp_path / "full", progress=False)
 
-    def crash(metrics):
-        if metrics["iteration"] == 2:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        train(cfg, tmp_path / "split", progress=False, callback=crash)
+    fakes.interrupt(cfg, tmp_path / "split", at=2)
     resumed = train(cfg, tmp_path / "split", progress=False)
     cols = ["step", "eval_return", "eval_success", "objective", "value_loss"]
     assert resumed[cols].equals(full[cols])

@@ -21,6 +21,8 @@ from oapo_lite.runstate import load_checkpoint, load_history
 from oapo_lite.train import train
 from oapo_lite.update import Sources, learner_dists, policy_distances, update_actors
 
+import fakes
+
 torch.set_num_threads(1)
 
 # Both agents walk right along one corridor: 3 steps each, optimum 1 - 0.03 = 0.97.
@@ -494,12 +496,7 @@ def test_annealed_run_without_value_norm_resumes_to_the_uninterrupted_numbers(tm
     cfg = TrainConfig(algo=algo, steps=160 * 7, checkpoint_every=2, lr_anneal=True, value_norm=False, **TINY)
     full = train(cfg, tmp_path / "full", progress=False)
 
-    def crash(metrics):
-        if metrics["iteration"] == 5:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        train(cfg, tmp_path / "resumed", progress=False, callback=crash)
+    fakes.interrupt(cfg, tmp_path / "resumed", at=5)
     _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
     # the schedule depends on steps: an annealed run cannot be extended
     with pytest.raises(ValueError, match="lr_anneal"):
