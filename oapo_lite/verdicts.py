@@ -351,6 +351,19 @@ def learned(ev: Evidence, label) -> bool:
                 and ev.level(label, "final").point > ev.metric.floor)
 
 
+def why_not_learned(ev: Evidence, label) -> str:
+    """Why curve ``label`` did not learn: the test(s) of ``learned`` it failed, with their numbers."""
+    s, floor = ev.summary.loc[label], ev.metric.floor
+    why = []
+    if not (s["gain_mean"] > LEARN_SE * s["gain_se"] and s["gain_mean"] > 0):
+        why.append(f"gain {s['gain_mean']:+.3g} +- {s['gain_se']:.2g} s.e. over {int(s['seeds'])} seeds, "
+                   f"not above {LEARN_SE:g} s.e.")
+    if ev.level(label, "final").point <= floor:
+        why.append(f"final IQM {ev.level(label, 'final').point:.3g}, not above the floor {floor:g}")
+    return (f"{label} did not learn (initial {s['initial_mean']:.3g}, final {s['final_mean']:.3g}: "
+            f"{'; '.join(why)})")
+
+
 def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     """Why the data cannot decide a claim about ``labels``, or None if it can."""
     if ev is None:
@@ -360,9 +373,7 @@ def _undecidable(ev: Evidence | None, test, labels) -> str | None:
            if x not in s.index or s.loc[x, "seeds"] < 2]
     if few:
         return f"fewer than 2 seeds on disk: {', '.join(few)}"
-    idle = [f"{x} did not learn (initial {s.loc[x, 'initial_mean']:.3g}, final {s.loc[x, 'final_mean']:.3g}, "
-            f"gain {s.loc[x, 'gain_mean']:+.3g} +- {s.loc[x, 'gain_se']:.2g} s.e. over {s.loc[x, 'seeds']} seeds)"
-            for x in labels if not learned(ev, x)]
+    idle = [why_not_learned(ev, x) for x in labels if not learned(ev, x)]
     if idle:
         return "; ".join(idle)
     if test is faster and not s.loc[list(labels), "reached"].any():

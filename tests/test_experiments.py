@@ -123,8 +123,10 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
         assert len({experiments.run_id(r.cfg) for r in runs}) == len(runs)
         assert all(":" not in experiments.run_id(r.cfg) for r in runs)
         assert {"oappo", "happo", "mappo", "seac"} <= labels, fig
-    # SMAX's cpu grid: the two small maps only, with their own steps; the paper's maps at paper
-    assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {"smax:3m": 300_000, "smax:2s3z": 500_000}
+    # SMAX's cpu grid: the small maps and two of the paper's, each with its own steps; MMM2's
+    # stand-in at paper only
+    assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {
+        "smax:3m": 300_000, "smax:2s3z": 500_000, "smax:6h_vs_8z": 500_000, "smax:3s5z_vs_3s6z": 1_000_000}
     paper = {r.cfg.env: r.cfg.steps for r in grid.runs_of("fig4_smax", "paper")}
     assert paper["smax:6h_vs_8z"] == 40_000_000 and len(paper) == 5
     # A2C runs evaluate at the same env steps as the PPO family on an engine's batch shape too

@@ -290,7 +290,7 @@ def test_a_flat_curve_is_not_testable_and_says_which_curve():
     out = {x.claim: x for x in v.claims("fig3b", df)}
     stuck = out["MAPPO (shared parameters) stays below the optimum"]
     assert stuck.status == v.NOT_TESTABLE  # below the optimum, but because it learned nothing
-    assert "mappo did not learn (initial -0.5, final -0.5" in stuck.reason
+    assert "mappo did not learn (initial -0.5, final -0.5: gain +0 +- 0 s.e. over 5 seeds, not above 2 s.e.)" in stuck.reason
     assert out["OAPPO converges faster than HAPPO"].status == v.REPRODUCED  # both learned
 
 
@@ -311,7 +311,10 @@ def test_one_lucky_evaluation_is_not_learning():
 def test_win_rates_below_the_floor_did_not_learn():
     # every seed rises, but only to a 3% win rate: below the 5% floor
     df = win_curves({"a": [0, 0.01, 0.02, 0.03, 0.03]})
-    assert not v.learned(v.Evidence(df, metric=v.WIN_RATE), "a")
+    ev = v.Evidence(df, metric=v.WIN_RATE)
+    assert not v.learned(ev, "a")
+    # the reason names the test that failed, not the one that passed
+    assert v.why_not_learned(ev, "a").endswith(": final IQM 0.05, not above the floor 0.05)")
 
 
 def test_two_learned_curves_with_p_above_one_half_are_reproduced():
