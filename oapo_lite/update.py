@@ -119,13 +119,14 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     episode is continued by V(final state) if ``bootstrap``, else it ends like a terminated
     one. Returns (normalised advantage (B,), returns (B,), the critic's normalised
     predictions (B,) for the clipped value loss)."""
+    cut = batch.terminated | batch.truncated
     with torch.no_grad():
         v_norm = critic(batch.state)
         value = value_norm.denormalize(v_norm)
-        final_value = value_norm.denormalize(critic(batch.final_state))
-    cut = batch.terminated | batch.truncated
-    next_value = torch.where(batch.truncated & ~batch.terminated & bootstrap, final_value,
-                             torch.where(cut, 0.0, value[1:]))
+        next_value = torch.where(cut, 0.0, value[1:])
+        if bootstrap:  # only then is V(final state) read: a critic forward the mazes do without
+            final_value = value_norm.denormalize(critic(batch.final_state))
+            next_value = torch.where(batch.truncated & ~batch.terminated, final_value, next_value)
     adv = gae(batch.reward, value[:-1], next_value, cut, cfg.gamma, cfg.gae_lambda)
     check_finite(adv, "the joint advantage (GAE)", "all: it is joint")
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
