@@ -129,9 +129,13 @@ class Actors(nn.Module):
         return params if self.head.continuous else params[:-1]
 
     def stack(self, nets) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std)."""
+        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std),
+        every bias (k, 1, out), as ``baddbmm`` adds it (shaped once: a rollout applies one stack
+        at every step)."""
         per_net = [list(self.weights[int(k)]) for k in nets]  # indexing a ParameterList is slow
-        return [torch.stack(layer) for layer in zip(*(w[:-1] for w in per_net))], torch.stack([w[-1] for w in per_net])
+        layers = [torch.stack(layer) for layer in zip(*(w[:-1] for w in per_net))]
+        return ([x if k % 2 == 0 else x.unsqueeze(1) for k, x in enumerate(layers)],
+                torch.stack([w[-1] for w in per_net]))
 
     def apply(self, stacked: tuple[list[torch.Tensor], torch.Tensor], obs: torch.Tensor,
               avail: torch.Tensor | None) -> torch.Tensor:
@@ -139,7 +143,7 @@ class Actors(nn.Module):
         layers, log_std = stacked
         x = obs
         for k in range(0, len(layers), 2):
-            x = torch.baddbmm(layers[k + 1].unsqueeze(1), x, layers[k])
+            x = torch.baddbmm(layers[k + 1], x, layers[k])
             if k < len(layers) - 2:
                 x = torch.relu(x)
         return self.head.params(x, avail, log_std)
