@@ -122,26 +122,25 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     reward = np.empty((length, N), np.float32)
     term, trunc = np.empty((length, N), bool), np.empty((length, N), bool)
     active = np.empty((length, N, n), bool)
-    act = (torch.empty((length, n, N, env.n_actions)) if continuous
-           else torch.empty((length, n, N), dtype=torch.long))
-    logp = torch.empty((length, n, N))
+    # numpy buffers, like the others: a step's writes into torch tensors cost several times more
+    act = np.empty((length, n, N, env.n_actions), np.float32) if continuous else np.empty((length, n, N), np.int64)
+    logp = np.empty((length, n, N), np.float32)
     returns, seconds = [], {"policy": 0.0, "env": 0.0}
     with torch.inference_mode():
         weights = actors.stack(owner)
-    for t in range(length):
-        obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
-        tic = time.perf_counter()
-        with torch.inference_mode():
-            act[t], logp[t] = sample_actions(actors, weights, step, gen)
-        toc = time.perf_counter()
-        step = env.step(act[t].transpose(0, 1).numpy())
-        seconds["policy"] += toc - tic
-        seconds["env"] += time.perf_counter() - toc
-        reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
-        returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
+        for t in range(length):
+            obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
+            tic = time.perf_counter()
+            act[t], logp[t] = (x.numpy() for x in sample_actions(actors, weights, step, gen))
+            toc = time.perf_counter()
+            step = env.step(act[t].swapaxes(0, 1))
+            seconds["policy"] += toc - tic
+            seconds["env"] += time.perf_counter() - toc
+            reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
+            returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
     state[length] = step.state
     batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
-                    *(torch.from_numpy(_per_agent(x.numpy(), 1)) for x in (act, logp)),
+                    *(torch.from_numpy(_per_agent(x, 1)) for x in (act, logp)),
                     *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
                     None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns, seconds)
     return batch, step
