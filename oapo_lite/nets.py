@@ -129,9 +129,12 @@ class Actors(nn.Module):
         return params if self.head.continuous else params[:-1]
 
     def stack(self, nets) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std)."""
+        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std),
+        every bias (k, 1, out), as ``baddbmm`` adds it (shaped once: a rollout applies one stack
+        at every step)."""
         per_net = [list(self.weights[int(k)]) for k in nets]  # indexing a ParameterList is slow
-        return [torch.stack(layer) for layer in zip(*(w[:-1] for w in per_net))], torch.stack([w[-1] for w in per_net])
+        layers = [_stack(layer) for layer in zip(*(w[:-1] for w in per_net))]
+        return [x if k % 2 == 0 else x.unsqueeze(1) for k, x in enumerate(layers)], _stack([w[-1] for w in per_net])
 
     def apply(self, stacked: tuple[list[torch.Tensor], torch.Tensor], obs: torch.Tensor,
               avail: torch.Tensor | None) -> torch.Tensor:
@@ -139,13 +142,19 @@ class Actors(nn.Module):
         layers, log_std = stacked
         x = obs
         for k in range(0, len(layers), 2):
-            x = torch.baddbmm(layers[k + 1].unsqueeze(1), x, layers[k])
+            x = torch.baddbmm(layers[k + 1], x, layers[k])
             if k < len(layers) - 2:
                 x = torch.relu(x)
         return self.head.params(x, avail, log_std)
 
     def forward(self, obs: torch.Tensor, nets, avail: torch.Tensor | None) -> torch.Tensor:
         return self.apply(self.stack(nets), obs, avail)
+
+
+def _stack(tensors) -> torch.Tensor:
+    """``torch.stack``, a view where there is one tensor: a learner's forward stacks its own net
+    alone, and a stack would copy it (and split the gradient again in the backward pass)."""
+    return tensors[0].unsqueeze(0) if len(tensors) == 1 else torch.stack(tensors)
 
 
 class Critic(nn.Module):

@@ -41,11 +41,49 @@ class Inputs:
     def of(cls, obs: np.ndarray, avail: np.ndarray) -> "Inputs":
         n, B = obs.shape[:2]
         obs, avail = obs.reshape(n * B, -1), avail.reshape(n * B, -1)
-        raw = np.ascontiguousarray(np.concatenate([obs.view(np.uint8), avail.view(np.uint8)], 1))
-        keys = raw.view(np.dtype((np.void, raw.shape[1]))).ravel()
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        first, inverse = distinct_rows(obs, avail)
         return cls(torch.from_numpy(obs[first]), torch.from_numpy(avail[first]),
                    torch.from_numpy(inverse.reshape(n, B)))
+
+
+def distinct_rows(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of 2-D arrays with equal row counts, read side by side as bytes:
+    (index of each one's first occurrence, the position of every row among them), in the
+    order of their bytes: np.unique's (return_index, return_inverse) over the rows' bytes.
+
+    np.unique compares whole rows, and two equal rows to their last byte; here each row's hash
+    is uniqued instead, every row checked to equal the first row of its hash (else np.unique
+    decides), and only the distinct rows are sorted by their bytes. The batch's rows are never
+    copied whole: a fresh megabyte costs more in page faults than all the rest."""
+    raw = [np.ascontiguousarray(c).view(np.uint8) for c in columns]
+    _, first, inverse = np.unique(_row_hash(columns), return_index=True, return_inverse=True)
+    if not all(_rows_equal(r, first[inverse]) for r in raw):  # two different rows with one hash
+        _, first, inverse = np.unique(_keys(np.concatenate(raw, 1)), return_index=True, return_inverse=True)
+        return first, inverse
+    order = np.argsort(_keys(np.concatenate([r[first] for r in raw], 1)))
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse]
+
+
+def _keys(raw: np.ndarray) -> np.ndarray:
+    """Every row of a 2-D uint8 array as one value that compares by its bytes."""
+    return np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).ravel()
+
+
+def _row_hash(columns: tuple[np.ndarray, ...]) -> np.ndarray:
+    """A 64-bit hash of every row: two fixed random projections of its numbers, in float32.
+    Rows that differ only where float32 cannot tell (-0.0 and 0.0, beyond a large value's
+    precision) share it; ``distinct_rows`` checks."""
+    rng = np.random.default_rng(0)
+    h = sum(np.asarray(c, np.float32) @ rng.standard_normal((c.shape[1], 2), np.float32) for c in columns)
+    return np.ascontiguousarray(h).view(np.uint64).ravel()
+
+
+def _rows_equal(raw: np.ndarray, rows: np.ndarray, chunk: int = 512) -> bool:
+    """``raw[rows] == raw``, a slice of rows at a time (a gathered copy of the whole batch
+    would be a fresh megabyte again)."""
+    return all(np.array_equal(raw[rows[i:i + chunk]], raw[i:i + chunk]) for i in range(0, len(raw), chunk))
 
 
 @dataclass
@@ -84,26 +122,25 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
     reward = np.empty((length, N), np.float32)
     term, trunc = np.empty((length, N), bool), np.empty((length, N), bool)
     active = np.empty((length, N, n), bool)
-    act = (torch.empty((length, n, N, env.n_actions)) if continuous
-           else torch.empty((length, n, N), dtype=torch.long))
-    logp = torch.empty((length, n, N))
+    # numpy buffers, like the others: a step's writes into torch tensors cost several times more
+    act = np.empty((length, n, N, env.n_actions), np.float32) if continuous else np.empty((length, n, N), np.int64)
+    logp = np.empty((length, n, N), np.float32)
     returns, seconds = [], {"policy": 0.0, "env": 0.0}
     with torch.inference_mode():
         weights = actors.stack(owner)
-    for t in range(length):
-        obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
-        tic = time.perf_counter()
-        with torch.inference_mode():
-            act[t], logp[t] = sample_actions(actors, weights, step, gen)
-        toc = time.perf_counter()
-        step = env.step(act[t].transpose(0, 1).numpy())
-        seconds["policy"] += toc - tic
-        seconds["env"] += time.perf_counter() - toc
-        reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
-        returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
+        for t in range(length):
+            obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
+            tic = time.perf_counter()
+            act[t], logp[t] = (x.numpy() for x in sample_actions(actors, weights, step, gen))
+            toc = time.perf_counter()
+            step = env.step(act[t].swapaxes(0, 1))
+            seconds["policy"] += toc - tic
+            seconds["env"] += time.perf_counter() - toc
+            reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
+            returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
     state[length] = step.state
     batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
-                    *(torch.from_numpy(_per_agent(x.numpy(), 1)) for x in (act, logp)),
+                    *(torch.from_numpy(_per_agent(x, 1)) for x in (act, logp)),
                     *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
                     None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns, seconds)
     return batch, step

@@ -68,6 +68,18 @@ def _minibatches(size: int, k: int, rng: np.random.Generator) -> list:
     return [slice(None)] if k == 1 else [torch.from_numpy(i) for i in np.array_split(rng.permutation(size), k)]
 
 
+def descend(opt: torch.optim.Optimizer, params: list[torch.Tensor], loss: torch.Tensor, max_norm: float) -> None:
+    """One step of ``opt`` down the gradient of ``loss``, its norm clipped to ``max_norm`` as
+    torch.nn.utils.clip_grad_norm_ clips it, bit for bit, but without grouping the tensors by
+    device and dtype at every call, which on these small nets costs as much as the clip."""
+    opt.zero_grad()
+    loss.backward()
+    grads = [p.grad for p in params]
+    norm = torch.linalg.vector_norm(torch.stack(torch._foreach_norm(grads)))
+    torch._foreach_mul_(grads, (max_norm / (norm + 1e-6)).clamp(max=1.0))
+    opt.step()
+
+
 def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: Sources, factor: torch.Tensor,
                adv: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
     """OAPPO (Eq. 8): epochs of Adam on the clipped off-agent surrogate plus the entropy of
@@ -83,10 +95,7 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
             entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
             loss = -(obj + cfg.entropy_coef * entropy)
             check_finite(loss, "the PPO loss (Eq. 8)", src.net)
-            opt.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
-            opt.step()
+            descend(opt, params, loss, cfg.max_grad_norm)
     return obj.item()
 
 
@@ -119,13 +128,14 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     episode is continued by V(final state) if ``bootstrap``, else it ends like a terminated
     one. Returns (normalised advantage (B,), returns (B,), the critic's normalised
     predictions (B,) for the clipped value loss)."""
+    cut = batch.terminated | batch.truncated
     with torch.no_grad():
         v_norm = critic(batch.state)
         value = value_norm.denormalize(v_norm)
-        final_value = value_norm.denormalize(critic(batch.final_state))
-    cut = batch.terminated | batch.truncated
-    next_value = torch.where(batch.truncated & ~batch.terminated & bootstrap, final_value,
-                             torch.where(cut, 0.0, value[1:]))
+        next_value = torch.where(cut, 0.0, value[1:])
+        if bootstrap:  # only then is V(final state) read: a critic forward the mazes do without
+            final_value = value_norm.denormalize(critic(batch.final_state))
+            next_value = torch.where(batch.truncated & ~batch.terminated, final_value, next_value)
     adv = gae(batch.reward, value[:-1], next_value, cut, cfg.gamma, cfg.gae_lambda)
     check_finite(adv, "the joint advantage (GAE)", "all: it is joint")
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
@@ -223,10 +233,7 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
             loss = value_loss(critic(state[idx]), v_old[idx], target[idx], cfg.clip)
             check_finite(loss, "the value loss", "critic")
-            opt.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.max_grad_norm)
-            opt.step()
+            descend(opt, list(critic.parameters()), loss, cfg.max_grad_norm)
     return loss.item()
 
 

@@ -1,4 +1,5 @@
 """Objectives and distributions of the neural track against independent computations."""
+import copy
 import math
 from types import SimpleNamespace
 
@@ -8,9 +9,9 @@ import torch
 
 from oapo_lite import reuse
 from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
-from oapo_lite.nets import Actors, Categorical, Gaussian, ValueNorm
+from oapo_lite.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
 from oapo_lite.config import TrainConfig
-from oapo_lite.update import advantages
+from oapo_lite.update import advantages, descend
 
 torch.set_num_threads(1)
 
@@ -250,3 +251,19 @@ def test_kl_matrix_feeds_the_reuse_rule():
     K = Categorical.kl_matrix(torch.stack([d, d]), "max")
     assert (K == 0).all()
     assert (reuse.oapo_matrix(K, 0.0, 0.5) == 0.5).all()
+
+
+@pytest.mark.parametrize("max_norm", [1e-3, 1e3], ids=["clipped", "not clipped"])
+def test_descend_is_torchs_clipped_step_bit_for_bit(max_norm):
+    g = torch.Generator().manual_seed(0)
+    ours = Critic(7, (16, 16), g)
+    torchs = copy.deepcopy(ours)
+    x, y = torch.randn(2, 50, 7, generator=g)
+    opts = [torch.optim.Adam(net.parameters(), lr=1e-2, fused=True) for net in (ours, torchs)]
+    for _ in range(3):
+        descend(opts[0], list(ours.parameters()), (ours(x) - y[:, 0]).pow(2).mean(), max_norm)
+        opts[1].zero_grad()
+        (torchs(x) - y[:, 0]).pow(2).mean().backward()
+        torch.nn.utils.clip_grad_norm_(torchs.parameters(), max_norm)
+        opts[1].step()
+    assert all(torch.equal(a, b) for a, b in zip(ours.parameters(), torchs.parameters()))
