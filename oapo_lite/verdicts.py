@@ -344,24 +344,29 @@ def _fmt_final(ev: Evidence, label) -> str:
     return f"{label} {ev.level(label, 'final').fmt()} (mean {ev.summary.loc[label, 'final_mean']:.3f})"
 
 
+def _learning_failures(ev: Evidence, label) -> list[str]:
+    """The tests of the module docstring's learning rule that curve ``label`` fails, each with
+    its numbers (none: it learned)."""
+    s, floor, final = ev.summary.loc[label], ev.metric.floor, ev.level(label, "final").point
+    failures = []
+    if not (s["gain_mean"] > LEARN_SE * s["gain_se"] and s["gain_mean"] > 0):
+        failures.append(f"gain {s['gain_mean']:+.3g} +- {s['gain_se']:.2g} s.e. over {int(s['seeds'])} seeds, "
+                        f"not above {LEARN_SE:g} s.e.")
+    if final <= floor:
+        failures.append(f"final IQM {final:.3g}, not above the floor {floor:g}")
+    return failures
+
+
 def learned(ev: Evidence, label) -> bool:
     """Whether curve ``label`` learned at this budget (the module docstring's rule)."""
-    s = ev.summary.loc[label]
-    return bool(s["gain_mean"] > LEARN_SE * s["gain_se"] and s["gain_mean"] > 0
-                and ev.level(label, "final").point > ev.metric.floor)
+    return not _learning_failures(ev, label)
 
 
 def why_not_learned(ev: Evidence, label) -> str:
-    """Why curve ``label`` did not learn: the test(s) of ``learned`` it failed, with their numbers."""
-    s, floor = ev.summary.loc[label], ev.metric.floor
-    why = []
-    if not (s["gain_mean"] > LEARN_SE * s["gain_se"] and s["gain_mean"] > 0):
-        why.append(f"gain {s['gain_mean']:+.3g} +- {s['gain_se']:.2g} s.e. over {int(s['seeds'])} seeds, "
-                   f"not above {LEARN_SE:g} s.e.")
-    if ev.level(label, "final").point <= floor:
-        why.append(f"final IQM {ev.level(label, 'final').point:.3g}, not above the floor {floor:g}")
+    """Why curve ``label`` did not learn: the tests of ``learned`` it failed, with their numbers."""
+    s = ev.summary.loc[label]
     return (f"{label} did not learn (initial {s['initial_mean']:.3g}, final {s['final_mean']:.3g}: "
-            f"{'; '.join(why)})")
+            f"{'; '.join(_learning_failures(ev, label))})")
 
 
 def _undecidable(ev: Evidence | None, test, labels) -> str | None:
