@@ -2,6 +2,7 @@
 for evaluation (``episode_scores``), and the batch they produce (``Rollout``)."""
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -44,6 +45,23 @@ class Inputs:
         first, inverse = distinct_rows(obs, avail)
         return cls(torch.from_numpy(obs[first]), torch.from_numpy(avail[first]),
                    torch.from_numpy(inverse.reshape(n, B)))
+
+
+@dataclass
+class States:
+    """The batch's states with every distinct one stored once, for the critic: state s_t of env
+    copy e is row ``index[t, e]`` of ``rows``. The mazes' states repeat (every copy starts
+    alike, and a policy that has learned walks one path), and V(s) and its gradient then cost
+    what the distinct states cost."""
+
+    rows: torch.Tensor  # (U, state_dim)
+    index: torch.Tensor  # (T + 1, N)
+
+    @classmethod
+    def of(cls, state: torch.Tensor) -> "States":
+        flat = state.reshape(-1, state.shape[-1]).numpy()
+        first, inverse = distinct_rows(flat)
+        return cls(torch.from_numpy(flat[first]), torch.from_numpy(inverse).reshape(state.shape[:-1]))
 
 
 def distinct_rows(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,6 +119,11 @@ class Rollout:
     active: torch.Tensor | None = None
     episode_returns: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)  # spent in the policy forwards and in env stepping
+
+    @functools.cached_property
+    def states(self) -> States:
+        """``state`` de-duplicated, found when a critic first asks (SEAC and SePS value observations)."""
+        return States.of(self.state)
 
 
 def sample_actions(actors: Actors, weights, step, gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:

@@ -16,7 +16,7 @@ from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
 from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
                               update_factor, value_loss, weighted_kl)
 from oapo_lite.nets import Actors, Critic, ValueNorm
-from oapo_lite.rollout import Inputs, Rollout, mean_or_nan
+from oapo_lite.rollout import Inputs, Rollout, States, mean_or_nan
 from oapo_lite.trpo import trpo_step
 
 
@@ -130,7 +130,7 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     predictions (B,) for the clipped value loss)."""
     cut = batch.terminated | batch.truncated
     with torch.no_grad():
-        v_norm = critic(batch.state)
+        v_norm = critic(batch.states.rows)[batch.states.index]
         value = value_norm.denormalize(v_norm)
         next_value = torch.where(cut, 0.0, value[1:])
         if bootstrap:  # only then is V(final state) read: a critic forward the mazes do without
@@ -224,14 +224,18 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, own
     return factor, objectives, trpo_kls
 
 
-def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueNorm, state: torch.Tensor,
+def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueNorm, states: States,
                   v_old: torch.Tensor, returns: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
-    """The critic, trained after the actors (HARL) on normalised targets. Returns the last loss."""
+    """The critic, trained after the actors (HARL) on normalised targets, on the states of
+    the batch's samples (``states`` less the last step's). Returns the last loss."""
     value_norm.update(returns)
-    target, state = value_norm.normalize(returns), state.reshape(returns.shape[0], -1)
+    target, index = value_norm.normalize(returns), states.index[:-1].reshape(-1)
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
-            loss = value_loss(critic(state[idx]), v_old[idx], target[idx], cfg.clip)
+            # the whole batch reads every distinct state (the last step's too); a minibatch, its own
+            used, inverse = ((slice(None), index) if isinstance(idx, slice)
+                             else torch.unique(index[idx], return_inverse=True))
+            loss = value_loss(critic(states.rows[used])[inverse], v_old[idx], target[idx], cfg.clip)
             check_finite(loss, "the value loss", "critic")
             descend(opt, list(critic.parameters()), loss, cfg.max_grad_norm)
     return loss.item()
@@ -287,8 +291,8 @@ class Learner:
         order = reuse.update_order(actors.n_nets, self.rng) if spec.sequential else range(actors.n_nets)
         _, objectives, trpo_kls = update_actors(actors, self.actor_opts, batch, W, self.owner, order, adv, spec, cfg,
                                                 self.rng)
-        critic_loss = update_critic(self.critic, self.critic_opt, self.value_norm, batch.state[:-1], v_old, returns,
-                                    cfg, self.rng)
+        critic_loss = update_critic(self.critic, self.critic_opt, self.value_norm, batch.states, v_old, returns, cfg,
+                                    self.rng)
         accepted = [k for k in trpo_kls if not math.isnan(k)]
         metrics = {
             "train_return": mean_or_nan(batch.episode_returns),

@@ -11,7 +11,8 @@ from oapo_lite import reuse
 from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
 from oapo_lite.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
 from oapo_lite.config import TrainConfig
-from oapo_lite.update import advantages, descend
+from oapo_lite.rollout import States
+from oapo_lite.update import _minibatches, advantages, descend, update_critic
 
 torch.set_num_threads(1)
 
@@ -58,7 +59,7 @@ def test_advantages_of_a_hand_computed_three_step_rollout(bootstrap, env0):
       A_0 = -0.5; delta_2 = 1 + 0.9 * 3.5 - 2.5 = 1.65; A_1 = 1 + 0.9 * 2.5 - 1.5 + 0.72 * 1.65."""
     value = torch.tensor([[1.0, 0.5], [2.0, 1.5], [3.0, 2.5], [4.0, 3.5]])
     batch = SimpleNamespace(
-        state=value[..., None],
+        states=States.of(value[..., None]),
         final_state=torch.tensor([[7.0, 7.0], [10.0, 7.0], [7.0, 7.0]])[..., None],  # 7: never read
         reward=torch.tensor([[1.0, 0.0], [0.0, 1.0], [2.0, 1.0]]),
         terminated=torch.tensor([[False, True], [False, False], [False, False]]),
@@ -73,6 +74,35 @@ def test_advantages_of_a_hand_computed_three_step_rollout(bootstrap, env0):
     torch.testing.assert_close(adv, normalise(expected.reshape(-1)))
     torch.testing.assert_close(v_old, value[:-1].reshape(-1))
 
+
+
+@pytest.mark.parametrize("n_minibatch", [1, 2])
+def test_the_critic_on_distinct_states_moves_as_on_every_samples_own_state(n_minibatch):
+    """update_critic forwards every distinct state once and reads each sample's value from it;
+    plain SGD steps then move the critic as the value loss on every sample's own state does, up
+    to float32 sums taken in another order (1e-5 relative)."""
+    g = torch.Generator().manual_seed(0)
+    T, N, D = 10, 8, 6
+    state = torch.randn(5, D, generator=g)[torch.randint(0, 5, (T + 1, N), generator=g)]  # 5 states, repeating
+    returns, v_old = torch.randn(2, T * N, generator=g)
+    cfg = TrainConfig(n_envs=N, rollout_len=T, ppo_epochs=3, n_minibatch=n_minibatch, max_grad_norm=1e6)
+    critic = Critic(D, (16, 16), g)
+    plain = copy.deepcopy(critic)
+    states = States.of(state)
+    assert len(states.rows) <= 5
+    update_critic(critic, torch.optim.SGD(critic.parameters(), lr=0.1), ValueNorm(), states, v_old, returns, cfg,
+                  np.random.default_rng(0))
+
+    value_norm, rng, opt = ValueNorm(), np.random.default_rng(0), torch.optim.SGD(plain.parameters(), lr=0.1)
+    value_norm.update(returns)
+    own_state, target = state[:-1].reshape(T * N, D), value_norm.normalize(returns)
+    for _ in range(cfg.ppo_epochs):
+        for idx in _minibatches(T * N, n_minibatch, rng):
+            opt.zero_grad()
+            value_loss(plain(own_state[idx]), v_old[idx], target[idx], cfg.clip).backward()
+            opt.step()
+    for moved, reference in zip(critic.parameters(), plain.parameters()):
+        torch.testing.assert_close(moved, reference, rtol=1e-5, atol=1e-6)
 
 def _sources(seed=0, S=3, B=50):
     g = torch.Generator().manual_seed(seed)

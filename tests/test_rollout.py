@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from oapo_lite import rollout
-from oapo_lite.rollout import Inputs, distinct_rows
+from oapo_lite.rollout import Inputs, States, distinct_rows
 
 
 def unique_by_bytes(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -49,3 +49,12 @@ def test_inputs_store_each_distinct_input_once_and_give_back_every_sample():
     assert torch.equal(inputs.avail[inputs.index], torch.from_numpy(avail))
     rows = np.concatenate([inputs.obs.numpy().view(np.uint8), inputs.avail.numpy().view(np.uint8)], 1)
     assert len(np.unique(rows, axis=0)) == len(rows)
+
+
+def test_states_store_each_distinct_state_once_and_give_back_every_step():
+    rng = np.random.default_rng(2)
+    T, N = 50, 32
+    state = torch.from_numpy(repeating_rows(rng, (T + 1) * N, 163).reshape(T + 1, N, 163))
+    states = States.of(state)
+    assert torch.equal(states.rows[states.index].view(torch.int32), state.view(torch.int32))
+    assert len(np.unique(states.rows.numpy().view(np.uint8), axis=0)) == len(states.rows) < (T + 1) * N
