@@ -123,6 +123,15 @@ def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tens
         return objective().item(), accepted
 
 
+def values(critic: Critic, rows: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """V(rows[index]). Where most samples repeat a state (the mazes: every copy starts alike, and
+    a policy that has learned walks one path), from one forward of the distinct states, which
+    V's gradient then costs too; else the samples' rows as they come (the engines' batches,
+    where a state seldom repeats), so that the gradient sums them in their own order."""
+    used, inverse = torch.unique(index, return_inverse=True)
+    return critic(rows[used])[inverse] if 2 * len(used) <= len(index) else critic(rows[index])
+
+
 def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: TrainConfig, bootstrap: bool):
     """Algorithm 1 line 4: the joint advantage by GAE on de-normalised V(s); a truncated
     episode is continued by V(final state) if ``bootstrap``, else it ends like a terminated
@@ -130,7 +139,7 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     predictions (B,) for the clipped value loss)."""
     cut = batch.terminated | batch.truncated
     with torch.no_grad():
-        v_norm = critic(batch.states.rows)[batch.states.index]
+        v_norm = values(critic, batch.states.rows, batch.states.index.reshape(-1)).reshape(batch.states.index.shape)
         value = value_norm.denormalize(v_norm)
         next_value = torch.where(cut, 0.0, value[1:])
         if bootstrap:  # only then is V(final state) read: a critic forward the mazes do without
@@ -232,10 +241,7 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
     target, index = value_norm.normalize(returns), states.index[:-1].reshape(-1)
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
-            # the whole batch reads every distinct state (the last step's too); a minibatch, its own
-            used, inverse = ((slice(None), index) if isinstance(idx, slice)
-                             else torch.unique(index[idx], return_inverse=True))
-            loss = value_loss(critic(states.rows[used])[inverse], v_old[idx], target[idx], cfg.clip)
+            loss = value_loss(values(critic, states.rows, index[idx]), v_old[idx], target[idx], cfg.clip)
             check_finite(loss, "the value loss", "critic")
             descend(opt, list(critic.parameters()), loss, cfg.max_grad_norm)
     return loss.item()

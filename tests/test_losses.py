@@ -12,7 +12,7 @@ from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, u
 from oapo_lite.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
 from oapo_lite.config import TrainConfig
 from oapo_lite.rollout import States
-from oapo_lite.update import _minibatches, advantages, descend, update_critic
+from oapo_lite.update import _minibatches, advantages, descend, update_critic, values
 
 torch.set_num_threads(1)
 
@@ -103,6 +103,22 @@ def test_the_critic_on_distinct_states_moves_as_on_every_samples_own_state(n_min
             opt.step()
     for moved, reference in zip(critic.parameters(), plain.parameters()):
         torch.testing.assert_close(moved, reference, rtol=1e-5, atol=1e-6)
+
+def test_values_forward_states_that_do_not_repeat_as_they_come():
+    """Where few states repeat (the engines' batches), ``values`` forwards the samples' own rows
+    in their order: the same numbers and the same gradient, bit for bit, as the plain forward;
+    where most repeat it reads each sample's value from its distinct state."""
+    g = torch.Generator().manual_seed(1)
+    rows, critic = torch.randn(40, 6, generator=g), Critic(6, (16, 16), g)
+    index = torch.randperm(40, generator=g)[torch.tensor([*range(30), 0, 1, 2])]  # 3 repeats of 33
+    plain = critic(rows[index])
+    assert torch.equal(values(critic, rows, index), plain)
+    grads = [torch.autograd.grad(f().square().mean(), list(critic.parameters()))
+             for f in (lambda: values(critic, rows, index), lambda: critic(rows[index]))]
+    assert all(torch.equal(a, b) for a, b in zip(*grads))
+    repeating = index[torch.randint(0, 10, (50,), generator=g)]  # 10 distinct states in 50
+    torch.testing.assert_close(values(critic, rows, repeating), critic(rows[repeating]))
+
 
 def _sources(seed=0, S=3, B=50):
     g = torch.Generator().manual_seed(seed)
