@@ -176,10 +176,6 @@ class Learner:
         """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout.
         Returns (metrics for the results rows, nothing more for the history)."""
         next_obs = torch.from_numpy(step.obs)
-        if self.cfg.lr_anneal:
-            for opt in self.a2c.opts:
-                for group in opt.param_groups:
-                    group["lr"] = self.cfg.a2c_lr * self.cfg.lr_scale(it)
         if self.buffer is not None:
             self._record(batch, next_obs)
         metrics = self.a2c.learn(batch, next_obs, self.owner)
@@ -187,8 +183,11 @@ class Learner:
             self._regroup()
         returns = batch.episode_returns
         metrics = {"train_return": sum(returns) / len(returns) if returns else float("nan"), **metrics}
-        detail = {"lr_scale": self.cfg.lr_scale(it)} if self.cfg.lr_anneal else {}
-        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), detail
+        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), {}
+
+    def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
+        """Every optimiser with its learning rate before annealing."""
+        return [(opt, self.cfg.a2c_lr) for opt in self.a2c.opts]
 
     def _record(self, batch, next_obs: torch.Tensor) -> None:
         """Store (o, a, o', r, id); o' of the last step is the observation after the rollout

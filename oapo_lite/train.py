@@ -67,10 +67,15 @@ def iterate(state: RunState, clock: dict) -> dict:
     for part, seconds in batch.seconds.items():
         clock[part] += seconds
     tic = time.perf_counter()
+    if cfg.lr_anneal:  # set every iteration from the config: a resumed run continues the same schedule
+        for opt, lr in state.learner.optimisers():
+            for group in opt.param_groups:
+                group["lr"] = lr * cfg.lr_scale(it)
     metrics, detail = state.learner.learn(batch, state.step, it)
     clock["learn"] += time.perf_counter() - tic
     state.iteration = it + 1
-    state.history.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, **metrics, **detail})
+    state.history.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, **metrics, **detail,
+                          **({"lr_scale": cfg.lr_scale(it)} if cfg.lr_anneal else {})})
     return metrics
 
 

@@ -277,10 +277,6 @@ class Learner:
         """Iteration ``it``'s update on ``batch``: (metrics for the results rows, per-iteration
         detail for the history: the KL of every accepted trust-region step)."""
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
-        if cfg.lr_anneal:  # set every iteration from the config: a resumed run continues the same schedule
-            for opt, lr in [(o, cfg.lr) for o in self.actor_opts] + [(self.critic_opt, cfg.critic_lr)]:
-                for group in opt.param_groups:
-                    group["lr"] = lr * cfg.lr_scale(it)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
         # K feeds Eq. 9 only for OAPO; for the others it is a logged column, which the results
         # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
@@ -308,7 +304,11 @@ class Learner:
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
             metrics["agreement"] = np.round(C, 6)
-        return metrics, {"trpo_kls": trpo_kls, **({"lr_scale": cfg.lr_scale(it)} if cfg.lr_anneal else {})}
+        return metrics, {"trpo_kls": trpo_kls}
+
+    def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
+        """Every optimiser with its learning rate before annealing."""
+        return [(o, self.cfg.lr) for o in self.actor_opts] + [(self.critic_opt, self.cfg.critic_lr)]
 
     def state_dict(self) -> dict:
         return {"critic": self.critic.state_dict(), "value_norm": self.value_norm.state_dict(),
