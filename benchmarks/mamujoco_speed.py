@@ -1,23 +1,27 @@
 """Env steps per second on Multi-agent MuJoCo: the bare engine, the vector env, the training loop.
 
     .venv/bin/python benchmarks/mamujoco_speed.py [--envs HalfCheetah-2x3 Ant-2x4] [--steps 20000]
+        [--algos oappo happo mappo] [--iterations 40]
 
 Prints wall-clock and CPU-time rates (on a shared machine the CPU-time rate is the one that
 carries over to an idle core). "bare": one ParallelEnv stepped with random actions, resets
 included; "vector": ``make_vec`` (copies stepped one after another, actions clipped, global
-state read every step); "loop": ``train`` (OAPPO) with the figure's cpu batch shape, learning included.
+state read every step); "loop": ``train`` with the figure's cpu run of each algorithm, learning
+and evaluation included: ``--iterations`` 40 evaluate 3 times, as often as the cpu run does
+(every 20 iterations) plus the evaluation before the first iteration, which a 500-iteration run
+spreads thinner. Its share of the bare engine is of CPU rates.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 
 import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.grid import get_figure
-from oapo_lite.config import TrainConfig
+from oapo_lite.grid import FIGA_ALGOS, get_figure, runs_of
 from oapo_lite.train import train
 
 
@@ -53,12 +57,11 @@ def vector(name: str, steps: int, n_envs: int) -> tuple[float, float]:
     return timed(lambda: [vec.step(a) for _ in range(steps // n_envs)])
 
 
-def loop(name: str, steps: int) -> tuple[tuple[float, float], dict]:
-    """The figure's cpu configuration, evaluated on one episode at the start and the end only
-    (their time counts, their steps do not: a conservative rate)."""
-    b = get_figure("figA_mamujoco").budget("cpu")
-    cfg = TrainConfig(algo="oappo", env=f"mamujoco:{name}", steps=steps, eval_every=10_000, eval_episodes=1,
-                      **{**b.config, "checkpoint_every": 10_000})
+def loop(name: str, algo: str, iterations: int) -> tuple[tuple[float, float], dict]:
+    """``iterations`` iterations of the figure's cpu run of ``algo`` (seed 0) on ``name``,
+    evaluated as that run is: before the first iteration and every ``eval_every``-th."""
+    run = next(r for r in runs_of("figA_mamujoco", "cpu") if r.cfg.algo == algo and r.cfg.seed == 0)
+    cfg = dataclasses.replace(run.cfg, env=f"mamujoco:{name}", steps=iterations * run.cfg.iteration_steps)
     timing = {}
     with tempfile.TemporaryDirectory() as tmp:
         t = timed(lambda: train(cfg, tmp, progress=False, timing=timing))
@@ -66,18 +69,24 @@ def loop(name: str, steps: int) -> tuple[tuple[float, float], dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["HalfCheetah-2x3", "Ant-2x4"])
-    parser.add_argument("--steps", type=int, default=20_000, help="env steps per measurement")
+    parser.add_argument("--steps", type=int, default=20_000, help="env steps of the bare and vector measurements")
+    parser.add_argument("--algos", nargs="+", default=["oappo", "happo", "mappo"], choices=FIGA_ALGOS[:3])
+    parser.add_argument("--iterations", type=int, default=40, help="iterations of each loop measurement")
     args = parser.parse_args()
-    n_envs = get_figure("figA_mamujoco").budget("cpu").config["n_envs"]
+    fig = get_figure("figA_mamujoco").budget("cpu")
+    n_envs = fig.config["n_envs"]
     for name in args.envs:
         print(f"{name}")
-        print(f"  bare engine           {rate(args.steps, bare(name, args.steps))}")
+        engine = bare(name, args.steps)
+        print(f"  bare engine           {rate(args.steps, engine)}")
         print(f"  vector env ({n_envs} copies) {rate(args.steps, vector(name, args.steps, n_envs))}")
-        t, timing = loop(name, args.steps)
-        print(f"  training loop         {rate(args.steps, t)}  (wall seconds: "
-              + ", ".join(f"{k} {v:.1f}" for k, v in timing.items()) + ")")
+        for algo in args.algos:
+            t, timing = loop(name, algo, args.iterations)
+            steps = args.iterations * n_envs * fig.config["rollout_len"]
+            print(f"  loop {algo:<7}          {rate(steps, t)}, {engine[1] / args.steps * steps / t[1]:.0%} of the "
+                  "bare engine's CPU rate; wall seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in timing.items()))
 
 
 if __name__ == "__main__":

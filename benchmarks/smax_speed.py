@@ -8,8 +8,10 @@ random available actions, at Fig. 4's ``n_envs``. Loop: ``train`` with the ``cpu
 config of the map, for a few iterations (rollouts, learning, evaluation, checkpoints). Both
 run after JAX has compiled (the compile time is printed separately). Wall-clock figures
 depend on what else runs on the machine; CPU seconds (this process, all threads) do not, and
-the ``--grid`` projection of the cpu budget uses them. If the loop reaches less than half of
-the bare env's throughput, the top of a profile of the loop is printed.
+the ``--grid`` projection of the cpu budget uses them: the loop's share of the bare env is
+printed both ways ("of env": wall-clock steps/s, then CPU seconds per step). The env / policy /
+learn / eval columns split the loop's wall time. If the loop reaches less than half of the bare
+env's throughput, the top of a profile of the loop is printed.
 """
 from __future__ import annotations
 
@@ -79,13 +81,14 @@ def speed(map_name: str, algos: list[str], iterations: int) -> None:
           f"JAX compile (first env of the process): {env['compile_s']:.1f} s")
     print(f"bare env: {env['steps_per_s']:8.0f} env steps/s, {env['cpu_per_kstep']:.3f} CPU s per 1k steps")
     loop(config(map_name, "happo", 1))  # warm-up: torch's first-call costs are not the loop's
-    print(f"{'algo':<8} {'steps/s':>8} {'of env':>7} {'CPU s/1k':>9} {'env':>6} {'policy':>7} {'learn':>6} {'eval':>6}")
+    print(f"{'algo':<8} {'steps/s':>8} {'of env':>7} {'CPU s/1k':>9} {'of env':>7} {'env':>6} {'policy':>7} "
+          f"{'learn':>6} {'eval':>6}")
     slow = []
     for algo in algos:
         r = loop(config(map_name, algo, iterations))
-        ratio = r["steps_per_s"] / env["steps_per_s"]
-        print(f"{algo:<8} {r['steps_per_s']:8.0f} {ratio:7.1%} {r['cpu_per_kstep']:9.3f} {r['env']:6.1%} "
-              f"{r['policy']:7.1%} {r['learn']:6.1%} {r['eval']:6.1%}")
+        ratio, cpu_ratio = r["steps_per_s"] / env["steps_per_s"], env["cpu_per_kstep"] / r["cpu_per_kstep"]
+        print(f"{algo:<8} {r['steps_per_s']:8.0f} {ratio:7.1%} {r['cpu_per_kstep']:9.3f} {cpu_ratio:7.1%} "
+              f"{r['env']:6.1%} {r['policy']:7.1%} {r['learn']:6.1%} {r['eval']:6.1%}")
         slow += [algo] if ratio < 0.5 else []
     for algo in slow:
         print(f"\n{algo}: the loop reaches less than 50% of the bare env's throughput; profile of "
