@@ -16,10 +16,7 @@ env's throughput, the top of a profile of the loop is printed.
 from __future__ import annotations
 
 import argparse
-import cProfile
 import dataclasses
-import io
-import pstats
 import tempfile
 import time
 
@@ -29,6 +26,8 @@ from oapo_lite import grid
 from oapo_lite.envs.smax import SmaxVec
 from oapo_lite.config import TrainConfig
 from oapo_lite.train import train
+
+from loop_profile import profile
 
 
 def config(map_name: str, algo: str, iterations: int) -> TrainConfig:
@@ -63,15 +62,6 @@ def loop(cfg: TrainConfig) -> dict:
         wall, cpu = (b - a for a, b in zip((wall, cpu), clocks()))
     return {"steps_per_s": cfg.steps / wall, "cpu_per_kstep": 1000 * cpu / cfg.steps,
             **{k: v / wall for k, v in timing.items()}}
-
-
-def profile(cfg: TrainConfig, top: int = 20) -> str:
-    with tempfile.TemporaryDirectory() as out:
-        prof = cProfile.Profile()
-        prof.runcall(train, cfg, out, resume=False, progress=False)
-    text = io.StringIO()
-    pstats.Stats(prof, stream=text).sort_stats("cumulative").print_stats(top)
-    return text.getvalue()
 
 
 def speed(map_name: str, algos: list[str], iterations: int) -> None:

@@ -178,10 +178,14 @@ def episode_scores(actors: Actors, owner: list[int], env, gen: torch.Generator, 
     """Mean return and success rate of the first episode of every copy, stochastic policies."""
     step = env.reset()
     ret, success = np.full(env.n_envs, np.nan), np.full(env.n_envs, np.nan)
+    # an env that steps copies one by one (GRF) can leave those whose first episode ended
+    step_only = getattr(env, "step_only", None)
     with torch.inference_mode():
         weights = actors.stack(owner)
         for _ in range(max_steps):
-            step = env.step(sample_actions(actors, weights, step, gen)[0].transpose(0, 1).numpy())
+            # every copy's action is drawn, so the generator's draws do not depend on who still plays
+            actions = sample_actions(actors, weights, step, gen)[0].transpose(0, 1).numpy()
+            step = env.step(actions) if step_only is None else step_only(actions, np.isnan(ret))
             first = np.isnan(ret) & ~np.isnan(step.episode_return)
             ret[first], success[first] = step.episode_return[first], step.episode_success[first]
             if not np.isnan(ret).any():

@@ -7,11 +7,14 @@ import os
 
 import numpy as np
 import pytest
+import torch
 
 from oapo_lite import experiments, grid
 from oapo_lite.__main__ import main
 from oapo_lite.envs import grf
 from oapo_lite.config import TrainConfig
+from oapo_lite.nets import Actors
+from oapo_lite.rollout import episode_scores
 from oapo_lite.train import train
 
 SCENARIO = "academy_3_vs_1_with_keeper"
@@ -86,6 +89,58 @@ def test_engine_snapshots_continue_identically():
     again = [env.step(a).obs for a in actions[20:]]
     env.close()
     np.testing.assert_array_equal(np.stack(first), np.stack(again))
+
+
+@needs_grf
+def test_step_only_steps_the_chosen_copies_as_their_engines_alone_would():
+    seed, n = 5, 3
+    env = grf.GRFVec(SCENARIO, n, seed=seed, max_steps=400, workers=2)
+    engines = [grf._make_engine(SCENARIO, grf.copy_seed(seed, k)) for k in range(n)]
+    np.testing.assert_array_equal(env.reset().obs, np.stack([e.reset() for e in engines]))
+    rng, ended = np.random.default_rng(2), 0
+    for _ in range(150):
+        which, a = rng.random(n) < 0.7, rng.integers(0, grf.N_ACTIONS, (n, env.n_agents))
+        step = env.step_only(a, which)
+        for k in range(n):
+            if not which[k]:
+                assert not step.obs[k].any() and np.isnan(step.episode_return[k]) and not step.truncated[k]
+                continue
+            obs, reward, done, _ = engines[k].step(a[k].tolist())
+            np.testing.assert_array_equal(step.final_obs[k], obs)
+            assert step.reward[k] == np.float32(np.mean(reward)) and done == (step.terminated[k] | step.truncated[k])
+            np.testing.assert_array_equal(step.obs[k], engines[k].reset() if done else obs)
+            ended += done
+    with pytest.raises(ValueError, match=r"which must be booleans of shape \(3,\), got int64"):
+        env.step_only(a, np.ones(n, np.int64))
+    env.close()
+    assert ended >= 2  # auto-resets are covered
+
+
+class _EveryCopy:
+    """A GRF env without ``step_only``: the evaluation steps every copy to the end."""
+
+    def __init__(self, env):
+        self.env, self.n_envs = env, env.n_envs
+
+    def reset(self):
+        return self.env.reset()
+
+    def step(self, actions):
+        return self.env.step(actions)
+
+
+@needs_grf
+def test_an_evaluation_that_stops_finished_copies_scores_as_one_that_steps_every_copy():
+    actors = Actors(3, grf.OBS_DIM, grf.N_ACTIONS, (16,), False, torch.Generator().manual_seed(0))
+    scores = []
+    for wrap in (lambda env: env, _EveryCopy):
+        env = grf.GRFVec(SCENARIO, 4, seed=1, max_steps=60, workers=2)
+        gen = torch.Generator().manual_seed(3)
+        # two evaluations: the second starts from the engines the first left
+        scores.append([episode_scores(actors, [0, 1, 2], wrap(env), gen, 60) for _ in range(2)] + [gen.get_state()])
+        env.close()
+    (first, second, gen_a), (first_b, second_b, gen_b) = scores
+    assert (first, second) == (first_b, second_b) and torch.equal(gen_a, gen_b)
 
 
 @needs_grf

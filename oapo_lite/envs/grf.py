@@ -8,8 +8,8 @@ agent's observation, concatenated. ``episode_success`` is 1 when the left team s
 Copies run in worker processes (one per core, each stepping its share of the copies), so
 the engine's C++ stepping of both halves happens at the same time; the main process only
 sends actions and stacks the answers. Copy k's engine is seeded with
-``copy_seed(seed, k)`` (``game_engine_random_seed``); the engine re-seeds itself on every
-reset from that seed and its episode count, so a copy's episodes are a fixed sequence.
+``copy_seed(seed, k)`` (``game_engine_random_seed``); the engine re-seeds itself from that
+seed on every reset, so an episode depends on the seed and the actions alone.
 """
 from __future__ import annotations
 
@@ -91,14 +91,16 @@ class _Copies:
         self.t[:], self.returns[:], self.scored[:] = 0, 0.0, False
         return np.stack([env.reset() for env in self.envs]).astype(np.float32)
 
-    def step(self, actions: np.ndarray) -> tuple:
-        """(obs, final_obs, reward, terminated, truncated, episode_return, episode_success), one row per copy."""
+    def step(self, actions: np.ndarray, which: np.ndarray) -> tuple:
+        """(obs, final_obs, reward, terminated, truncated, episode_return, episode_success), one row per
+        copy; only the copies in ``which`` step, the others' rows are zeros and NaN (nothing ended)."""
         k = len(self.envs)
-        obs, final_obs = np.empty((2, k, actions.shape[1], OBS_DIM), np.float32)
-        reward = np.empty(k, np.float32)
+        obs, final_obs = np.zeros((2, k, actions.shape[1], OBS_DIM), np.float32)
+        reward = np.zeros(k, np.float32)
         terminated, truncated = np.zeros(k, bool), np.zeros(k, bool)
         ep_return, ep_success = np.full(k, np.nan, np.float32), np.full(k, np.nan, np.float32)
-        for e, env in enumerate(self.envs):
+        for e in np.flatnonzero(which):
+            env = self.envs[e]
             o, r, done, info = env.step(actions[e].tolist())
             reward[e] = np.mean(r)
             self.t[e] += 1
@@ -224,13 +226,22 @@ class GRFVec:
 
     def step(self, actions) -> VecStep:
         """``actions`` (n_envs, n_agents) ints in 0..18."""
-        a = np.asarray(actions)
+        return self.step_only(actions, np.ones(self.n_envs, bool))
+
+    def step_only(self, actions, which) -> VecStep:
+        """Step only the copies where ``which`` (n_envs,) bool is true; the rows of the others hold
+        zeros and no episode ends there. An evaluation reads the first episode of every copy: the
+        copies whose first episode has ended would step on for nothing, at an engine's full cost
+        (the next ``reset`` starts every copy's episode afresh, from its seed alone)."""
+        a, which = np.asarray(actions), np.asarray(which)
         if a.shape != (self.n_envs, self.n_agents) or not np.issubdtype(a.dtype, np.integer):
             raise ValueError(f"actions must be integers of shape {(self.n_envs, self.n_agents)}, got "
                              f"{a.dtype} {a.shape}")
         if ((a < 0) | (a >= N_ACTIONS)).any():
             raise ValueError(f"actions must lie in 0..{N_ACTIONS - 1}, got {np.unique(a[(a < 0) | (a >= N_ACTIONS)])}")
-        parts = self._call("step", [(a[p],) for p in self._parts])
+        if which.shape != (self.n_envs,) or which.dtype != bool:
+            raise ValueError(f"which must be booleans of shape {(self.n_envs,)}, got {which.dtype} {which.shape}")
+        parts = self._call("step", [(a[p], which[p]) for p in self._parts])
         obs, final_obs, reward, term, trunc, ep_return, ep_success = (np.concatenate(x) for x in zip(*parts))
         avail, active = self._static()
         return VecStep(obs=obs, state=obs.reshape(self.n_envs, -1), avail=avail, reward=reward, terminated=term,

@@ -8,7 +8,10 @@ left, so hitting the time limit is part of the game: no bootstrap there) and ``o
 best team return, when an oracle knows it; NaN otherwise); ``reset()`` and ``step(actions)``
 (actions ``(n_envs, n_agents[, n_actions])``) return a ``VecStep``; ``get_state()`` /
 ``set_state(state)`` save and restore everything random or running, for checkpoints. The
-arrays of a step may be overwritten by the next step: the loop copies what it keeps.
+arrays of a step may be overwritten by the next step: the loop copies what it keeps. An env
+whose copies each cost an engine's CPU may also offer ``step_only(actions, which)``: a step of
+the copies where ``which`` (n_envs,) is true alone, zeros and no ended episode in the others'
+rows; the evaluation then stops the copies whose first episode has ended.
 """
 from __future__ import annotations
 
