@@ -31,7 +31,6 @@ the top of a profile of its main process follows.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import gc
 import os
 import sys
@@ -46,13 +45,12 @@ from oapo_lite.envs import grf
 from oapo_lite.runstate import RunState
 from oapo_lite.train import train
 
-from loop_profile import profile
+from loops import cut_short, profile
 
 
 def config(scenario: str, algo: str, iterations: int) -> TrainConfig:
     """The cpu budget's settings for ``algo`` on ``scenario``, seed 0, cut to ``iterations``."""
-    cfg = next(r.cfg for r in grid.runs_of("fig6b", "cpu") if r.cfg.env == f"grf:{scenario}" and r.label == algo)
-    return dataclasses.replace(cfg, seed=0, steps=iterations * cfg.iteration_steps)
+    return cut_short("fig6b", "cpu", algo, f"grf:{scenario}", iterations)
 
 
 def cpu_of(fn) -> tuple[float, float]:

@@ -14,15 +14,16 @@ spreads thinner. Its share of the bare engine is of CPU rates.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import tempfile
 import time
 
 import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.grid import FIGA_ALGOS, get_figure, runs_of
+from oapo_lite.grid import FIGA_ALGOS, get_figure
 from oapo_lite.train import train
+
+from loops import cut_short
 
 
 def rate(n: int, t: tuple[float, float]) -> str:
@@ -57,15 +58,15 @@ def vector(name: str, steps: int, n_envs: int) -> tuple[float, float]:
     return timed(lambda: [vec.step(a) for _ in range(steps // n_envs)])
 
 
-def loop(name: str, algo: str, iterations: int) -> tuple[tuple[float, float], dict]:
+def loop(name: str, algo: str, iterations: int) -> tuple[int, tuple[float, float], dict]:
     """``iterations`` iterations of the figure's cpu run of ``algo`` (seed 0) on ``name``,
-    evaluated as that run is: before the first iteration and every ``eval_every``-th."""
-    run = next(r for r in runs_of("figA_mamujoco", "cpu") if r.cfg.algo == algo and r.cfg.seed == 0)
-    cfg = dataclasses.replace(run.cfg, env=f"mamujoco:{name}", steps=iterations * run.cfg.iteration_steps)
+    evaluated as that run is, before the first iteration and every ``eval_every``-th: its env
+    steps, (wall, CPU) seconds and ``timing``."""
+    cfg = cut_short("figA_mamujoco", "cpu", algo, f"mamujoco:{name}", iterations)
     timing = {}
     with tempfile.TemporaryDirectory() as tmp:
         t = timed(lambda: train(cfg, tmp, progress=False, timing=timing))
-    return t, timing
+    return cfg.steps, t, timing
 
 
 def main() -> None:
@@ -75,16 +76,14 @@ def main() -> None:
     parser.add_argument("--algos", nargs="+", default=["oappo", "happo", "mappo"], choices=FIGA_ALGOS[:3])
     parser.add_argument("--iterations", type=int, default=40, help="iterations of each loop measurement")
     args = parser.parse_args()
-    fig = get_figure("figA_mamujoco").budget("cpu")
-    n_envs = fig.config["n_envs"]
+    n_envs = get_figure("figA_mamujoco").budget("cpu").config["n_envs"]
     for name in args.envs:
         print(f"{name}")
         engine = bare(name, args.steps)
         print(f"  bare engine           {rate(args.steps, engine)}")
         print(f"  vector env ({n_envs} copies) {rate(args.steps, vector(name, args.steps, n_envs))}")
         for algo in args.algos:
-            t, timing = loop(name, algo, args.iterations)
-            steps = args.iterations * n_envs * fig.config["rollout_len"]
+            steps, t, timing = loop(name, algo, args.iterations)
             print(f"  loop {algo:<7}          {rate(steps, t)}, {engine[1] / args.steps * steps / t[1]:.0%} of the "
                   "bare engine's CPU rate; wall seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in timing.items()))
 

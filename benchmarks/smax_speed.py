@@ -16,7 +16,6 @@ env's throughput, the top of a profile of the loop is printed.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import tempfile
 import time
 
@@ -27,14 +26,12 @@ from oapo_lite.envs.smax import SmaxVec
 from oapo_lite.config import TrainConfig
 from oapo_lite.train import train
 
-from loop_profile import profile
+from loops import cut_short, profile
 
 
 def config(map_name: str, algo: str, iterations: int) -> TrainConfig:
     """The figure's settings for ``algo`` on ``map_name`` (every map has runs at ``paper``)."""
-    cfg = next(r.cfg for r in grid.runs_of("fig4_smax", "paper")
-               if r.cfg.env == f"smax:{map_name}" and r.label == algo)
-    return dataclasses.replace(cfg, steps=iterations * cfg.n_envs * cfg.rollout_steps)
+    return cut_short("fig4_smax", "paper", algo, f"smax:{map_name}", iterations)
 
 
 def clocks() -> tuple[float, float]:
