@@ -25,6 +25,7 @@ import torch
 from torch import nn
 
 from oapo_lite import reuse, seps
+from oapo_lite.adam import Adam
 from oapo_lite.losses import check_finite, source_mean
 from oapo_lite.nets import Actors, Critic
 
@@ -84,7 +85,7 @@ class A2C:
         self.actors, self.seac_lambda, self.gamma = actors, seac_lambda, gamma
         self.max_grad_norm, self.entropy_coef = max_grad_norm, entropy_coef
         self.critics = nn.ModuleList(Critic(obs_dim, hidden, gen) for _ in range(actors.n_nets))
-        self.opts = [torch.optim.Adam(self.params(k), lr=lr, eps=eps, foreach=True) for k in range(actors.n_nets)]
+        self.opts = [Adam(self.params(k), lr=lr, eps=eps) for k in range(actors.n_nets)]
 
     def params(self, net: int) -> list[nn.Parameter]:
         return self.actors.net_params(net) + list(self.critics[net].parameters())

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from oapo_lite import adaptive, reuse
+from oapo_lite.adam import Adam
 from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
 from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
                               update_factor, value_loss, weighted_kl)
@@ -72,7 +73,8 @@ def descend(opt: torch.optim.Optimizer, params: list[torch.Tensor], loss: torch.
     """One step of ``opt`` down the gradient of ``loss``, its norm clipped to ``max_norm`` as
     torch.nn.utils.clip_grad_norm_ clips it, bit for bit, but without grouping the tensors by
     device and dtype at every call, which on these small nets costs as much as the clip."""
-    opt.zero_grad()
+    for p in params:  # opt.zero_grad(), without its profiler hook
+        p.grad = None
     loss.backward()
     grads = [p.grad for p in params]
     norm = torch.linalg.vector_norm(torch.stack(torch._foreach_norm(grads)))
@@ -267,10 +269,10 @@ class Learner:
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
         self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm(enabled=cfg.value_norm)
         # one optimiser per net: Adam would move a net that got no gradient through its momentum;
-        # trust-region algorithms step by hand. foreach: the same per-tensor kernels, looped in C++
+        # trust-region algorithms step by hand
         self.actor_opts = [] if self.spec.trust_region else [
-            torch.optim.Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5, foreach=True) for k in range(actors.n_nets)]
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5, foreach=True)
+            Adam(actors.net_params(k), lr=cfg.lr, eps=1e-5) for k in range(actors.n_nets)]
+        self.critic_opt = Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
         self.rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
 
     def learn(self, batch: Rollout, step, it: int) -> tuple[dict, dict]:

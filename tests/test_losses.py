@@ -12,6 +12,7 @@ from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, u
 from oapo_lite.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
 from oapo_lite.config import TrainConfig
 from oapo_lite.rollout import States
+from oapo_lite.adam import Adam
 from oapo_lite.update import _minibatches, advantages, descend, update_critic, values
 
 torch.set_num_threads(1)
@@ -313,3 +314,31 @@ def test_descend_is_torchs_clipped_step_bit_for_bit(max_norm):
         torch.nn.utils.clip_grad_norm_(torchs.parameters(), max_norm)
         opts[1].step()
     assert all(torch.equal(a, b) for a, b in zip(ours.parameters(), torchs.parameters()))
+
+
+def test_adam_is_torchs_foreach_adam_bit_for_bit_and_shares_its_checkpoints():
+    """The learners' Adam against torch's (foreach): parameters and state equal after steps
+    under a changing learning rate (annealing) and a parameter that misses its gradient at
+    first (its own step count then lags); a state saved by one loads into the other."""
+    g = torch.Generator().manual_seed(0)
+    ours = Critic(7, (16, 16), g)
+    torchs = copy.deepcopy(ours)
+    opts = [Adam(ours.parameters(), lr=1e-2, eps=1e-5),
+            torch.optim.Adam(torchs.parameters(), lr=1e-2, eps=1e-5, foreach=True)]
+    x, y = torch.randn(2, 50, 7, generator=g)
+    for k in range(40):
+        for net, opt in zip((ours, torchs), opts):
+            opt.param_groups[0]["lr"] = 1e-2 * (1 - k / 40)
+            opt.zero_grad()
+            (net(x) - y[:, 0]).pow(2).mean().backward()
+            if k < 3:
+                net.net[0].bias.grad = None
+            opt.step()
+        if k == 20:  # each continues from the other's state
+            states = [o.state_dict() for o in opts]
+            opts[0].load_state_dict(states[1])
+            opts[1].load_state_dict(states[0])
+    assert all(torch.equal(a, b) for a, b in zip(ours.parameters(), torchs.parameters()))
+    ours_state, torchs_state = (o.state_dict()["state"] for o in opts)
+    assert ours_state[1]["step"] == 37 and ours_state[0]["step"] == 40  # the bias missed 3 steps
+    assert all(torch.equal(ours_state[i][key], torchs_state[i][key]) for i in ours_state for key in ours_state[i])
