@@ -82,20 +82,26 @@ def descend(opt: torch.optim.Optimizer, params: list[torch.Tensor], loss: torch.
     opt.step()
 
 
+def ppo_loss(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor, adv: torch.Tensor,
+             cfg: TrainConfig, idx=slice(None)) -> tuple[torch.Tensor, torch.Tensor]:
+    """Eq. 8's loss of one learner on its sources' samples ``idx``: minus the clipped off-agent
+    surrogate and the entropy bonus of its own seats. Returns (loss, surrogate)."""
+    d = learner_dists(actors, inputs, src, idx)
+    active = None if src.active is None else src.active[:, idx]
+    obj = off_agent_objective(actors.head.log_prob(d, src.act[:, idx]), src.logp_old[:, idx], src.w,
+                              factor[idx], adv[idx], cfg.clip, active)
+    own_active = None if active is None else active[src.own].reshape(-1)
+    entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
+    return -(obj + cfg.entropy_coef * entropy), obj
+
+
 def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: Sources, factor: torch.Tensor,
                adv: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
-    """OAPPO (Eq. 8): epochs of Adam on the clipped off-agent surrogate plus the entropy of
-    the learner's own seats. Returns the last surrogate value."""
+    """OAPPO (Eq. 8): epochs of Adam on ``ppo_loss``. Returns the last surrogate value."""
     params = actors.net_params(src.net)
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(adv.shape[0], cfg.n_minibatch, rng):
-            d = learner_dists(actors, inputs, src, idx)
-            active = None if src.active is None else src.active[:, idx]
-            obj = off_agent_objective(actors.head.log_prob(d, src.act[:, idx]), src.logp_old[:, idx], src.w,
-                                      factor[idx], adv[idx], cfg.clip, active)
-            own_active = None if active is None else active[src.own].reshape(-1)
-            entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
-            loss = -(obj + cfg.entropy_coef * entropy)
+            loss, obj = ppo_loss(actors, inputs, src, factor, adv, cfg, idx)
             check_finite(loss, "the PPO loss (Eq. 8)", src.net)
             descend(opt, params, loss, cfg.max_grad_norm)
     return obj.item()
