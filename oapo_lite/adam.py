@@ -13,6 +13,8 @@ class Adam(torch.optim.Adam):
 
     def __init__(self, params, lr: float, eps: float):
         super().__init__(params, lr=lr, eps=eps, foreach=True)
+        if len(self.param_groups) != 1:
+            raise ValueError(f"{len(self.param_groups)} parameter groups given; allowed: one (a list of tensors)")
 
     @torch.no_grad()
     def step(self) -> None:

@@ -342,3 +342,5 @@ def test_adam_is_torchs_foreach_adam_bit_for_bit_and_shares_its_checkpoints():
     ours_state, torchs_state = (o.state_dict()["state"] for o in opts)
     assert ours_state[1]["step"] == 37 and ours_state[0]["step"] == 40  # the bias missed 3 steps
     assert all(torch.equal(ours_state[i][key], torchs_state[i][key]) for i in ours_state for key in ours_state[i])
+    with pytest.raises(ValueError, match="2 parameter groups given; allowed: one"):
+        Adam([{"params": [torch.zeros(1)]}, {"params": [torch.zeros(1)]}], lr=1e-2, eps=1e-5)
