@@ -45,7 +45,7 @@ from oapo_lite.envs import grf
 from oapo_lite.runstate import RunState
 from oapo_lite.train import train
 
-from loops import cut_short, profile
+from loops import cut_short, profile, warm_up
 
 
 def config(scenario: str, algo: str, iterations: int) -> TrainConfig:
@@ -114,13 +114,6 @@ def loop(cfg: TrainConfig) -> dict:
     return {"steps_per_cpu_s": cfg.steps / (main + workers), "start": sum(cpu) - main - workers, "main": main,
             "workers": workers,
             **{k: v / wall for k, v in timing.items()}}
-
-
-def warm_up() -> None:
-    """torch's first-call costs (the first Adam imports torch._dynamo, about 1 CPU-s) are the
-    process's, not the loop's: a few seconds of maze training pay them."""
-    with tempfile.TemporaryDirectory() as out:
-        train(TrainConfig(algo="happo", env="black_red", steps=1600, eval_episodes=2), out, progress=False)
 
 
 def speed(scenario: str, algos: list[str], iterations: int) -> None:

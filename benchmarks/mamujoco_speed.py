@@ -23,7 +23,7 @@ from oapo_lite.envs import mamujoco, registry
 from oapo_lite.grid import FIGA_ALGOS, get_figure
 from oapo_lite.train import train
 
-from loops import cut_short
+from loops import cut_short, warm_up
 
 
 def rate(n: int, t: tuple[float, float]) -> str:
@@ -77,6 +77,7 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=40, help="iterations of each loop measurement")
     args = parser.parse_args()
     n_envs = get_figure("figA_mamujoco").budget("cpu").config["n_envs"]
+    warm_up()
     for name in args.envs:
         print(f"{name}")
         engine = bare(name, args.steps)

@@ -24,6 +24,8 @@ from oapo_lite.config import TrainConfig
 from oapo_lite.grid import runs_of
 from oapo_lite.train import train
 
+from loops import warm_up
+
 
 def measure(algo: str, steps: int) -> dict:
     cfg = TrainConfig(algo=algo, env="black_red", seed=0, steps=steps, eval_every=10)
@@ -52,8 +54,7 @@ def main() -> None:
     parser.add_argument("--paper", action="store_true", help="CPU-seconds of a paper-budget OAPPO Black-Red run")
     parser.add_argument("--repeat", type=int, default=3, help="runs measured with --paper")
     args = parser.parse_args()
-    # warm-up: first-call costs of torch (the first Adam imports torch._dynamo, about 1 CPU-s) are the process's
-    measure("happo", 3_200)
+    warm_up()
     if args.paper:
         seconds = [paper_run_cpu_seconds() for _ in range(args.repeat)]
         print(f"paper-budget OAPPO Black-Red run (240k steps): {statistics.median(seconds):.2f} CPU-s "
