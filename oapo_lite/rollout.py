@@ -69,8 +69,8 @@ def distinct_rows(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (index of each one's first occurrence, the position of every row among them), in the
     order of their bytes: np.unique's (return_index, return_inverse) over the rows' bytes.
 
-    np.unique compares whole rows, and two equal rows to their last byte; here each row's hash
-    is uniqued instead, every row checked to equal the first row of its hash (else np.unique
+    np.unique compares whole rows, and two equal rows to their last byte; here each row's exact
+    hash is uniqued instead, every row checked to equal the first row of its hash (else np.unique
     decides), and only the distinct rows are sorted by their bytes. The batch's rows are never
     copied whole: a fresh megabyte costs more in page faults than all the rest."""
     raw = [np.ascontiguousarray(c).view(np.uint8) for c in columns]
@@ -89,17 +89,22 @@ def _keys(raw: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).ravel()
 
 
-def _row_hash(columns: tuple[np.ndarray, ...]) -> np.ndarray:
-    """A 64-bit hash of every row: two fixed random projections of its numbers, in float32.
-    Rows that differ only where float32 cannot tell (-0.0 and 0.0, beyond a large value's
-    precision) share it; ``distinct_rows`` checks. The product is torch's, on the loop's one
-    thread: numpy's BLAS spreads a SMAX batch's product over threads that, beside other work
-    on a shared machine, cost 30 times the product (8 ms, not 0.2)."""
+def _row_hash(columns: tuple[np.ndarray, ...], chunk: int = 512) -> np.ndarray:
+    """A 64-bit hash of every row: its bit patterns (32-bit words, or bytes where a row's width is
+    no multiple of 4) times fixed random odd numbers, summed modulo 2**64. Integer arithmetic, so
+    equal rows get equal hashes on any CPU, whatever kernel sums them (a floating-point product
+    rounded one row differently by its place in the batch under MKL's AVX2 kernels); different
+    rows may share one, and ``distinct_rows`` checks. A slice of rows at a time: a whole
+    batch widened to 64 bits would be a fresh megabyte again."""
     rng = np.random.default_rng(0)
-    h = sum(torch.from_numpy(np.asarray(c, np.float32)) @ torch.from_numpy(rng.standard_normal((c.shape[1], 2),
-                                                                                                  np.float32))
-            for c in columns)
-    return h.numpy().view(np.uint64).ravel()
+    h = np.zeros(len(columns[0]), np.uint64)
+    for c in columns:
+        raw = np.ascontiguousarray(c).reshape(len(c), -1).view(np.uint8)
+        words = raw.view(np.uint32) if raw.shape[1] % 4 == 0 else raw
+        odd = rng.integers(0, 2**64, words.shape[1], np.uint64, endpoint=False) | np.uint64(1)
+        for i in range(0, len(h), chunk):
+            h[i:i + chunk] += words[i:i + chunk].astype(np.uint64) @ odd
+    return h
 
 
 def _rows_equal(raw: np.ndarray, rows: np.ndarray, chunk: int = 512) -> bool:

@@ -58,3 +58,17 @@ def test_states_store_each_distinct_state_once_and_give_back_every_step():
     states = States.of(state)
     assert torch.equal(states.rows[states.index].view(torch.int32), state.view(torch.int32))
     assert len(np.unique(states.rows.numpy().view(np.uint8), axis=0)) == len(states.rows) < (T + 1) * N
+
+
+def test_the_row_hash_of_a_row_is_the_same_wherever_it_sits():
+    """Exact by construction: a row alone, and the same row at every place of a batch of other
+    rows, hashes alike (a floating-point product could round it by its place in the batch)."""
+    rng = np.random.default_rng(3)
+    for width in (1, 3, 75, 163):
+        batch = repeating_rows(rng, 3000, width)
+        masks = rng.random((3000, 5)) < 0.5
+        row, mask = batch[:1], masks[:1]
+        batch[::7], masks[::7] = row, mask
+        alone = rollout._row_hash((row, mask))
+        np.testing.assert_array_equal(rollout._row_hash((batch, masks))[::7], np.repeat(alone, len(batch[::7])))
+        assert len(np.unique(rollout._row_hash((batch[::7], masks[::7])))) == 1
