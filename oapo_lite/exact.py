@@ -189,9 +189,16 @@ def log_softmax(logits: np.ndarray) -> np.ndarray:
     return shifted - np.log(np.exp(shifted).sum(-1, keepdims=True))
 
 
+# A policy that has all but settled on one action gives the others e^-700 and less; below
+# float64's smallest normal number exp rounds to a denormal or to 0 by the CPU's code path, and a
+# 0 makes every KL against that table infinite (Lemma 1's bound -inf on one machine, finite on
+# another). So no probability is stored below it.
+LOG_TINY = float(np.log(np.finfo(float).tiny))
+
+
 def softmax(logits: np.ndarray) -> np.ndarray:
-    """Policy tables from logits, along the last axis."""
-    return np.exp(log_softmax(logits))
+    """Policy tables from logits, along the last axis; no entry below float64's smallest normal number."""
+    return np.exp(np.maximum(log_softmax(logits), LOG_TINY))
 
 
 def _tables(game: DecPOMDP, pis) -> np.ndarray:

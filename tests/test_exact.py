@@ -356,3 +356,17 @@ def test_lemma1_rejects_bad_omega():
         ex.lemma1(g, p, p, {(0, 1): 0.5})
     with pytest.raises(ValueError, match="one learner"):
         ex.lemma1(g, p, p, {(0, 2): 1.0})
+
+
+def test_a_settled_policy_keeps_every_probability_above_underflow():
+    """A table whose logits differ by more than float64's exp range keeps its unlikely actions at
+    float64's smallest normal number, never at 0 (whether exp gives a denormal or 0 there depends
+    on the CPU's code path), so the KL between two such tables stays finite and about 0."""
+    settled = np.array([[0.0, -800.0, -2000.0], [5.0, 5.0, -900.0]])
+    p, q = ex.softmax(settled), ex.softmax(settled - np.array([0.0, 0.0, 50.0]))  # only the unlikely action moves
+    assert (p >= np.finfo(float).tiny).all() and (q >= np.finfo(float).tiny).all()
+    np.testing.assert_allclose(p.sum(-1), 1.0, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(p[1, :2], [0.5, 0.5], rtol=1e-15)
+    assert 0.0 <= ex.kl_max(p, q) < 1e-250
+    np.testing.assert_allclose(ex.softmax(np.array([[1.0, 2.0, 3.0]])), [np.exp([1, 2, 3]) / np.exp([1, 2, 3]).sum()],
+                               rtol=1e-15)
