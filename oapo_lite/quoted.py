@@ -2,8 +2,9 @@
 
     quoted.check("K (max over the batch)", K, [[0, 0.0263], [0.0817, 0]], rtol=0.01)
 
-prints ``as quoted: K (max over the batch) [[0, 0.0263], [0.0817, 0]] (to 1%): True`` and
-returns the boolean. A committed notebook whose output says ``False`` there carries a wrong
+prints ``as quoted: K (max over the batch) [[0, 0.0263], [0.0817, 0]] (to 1%): True``. It
+returns nothing, so that a notebook cell that ends with it shows the line alone (nbval runs
+cells without IPython's history, and there a trailing ``;`` does not hide a result). A committed notebook whose output says ``False`` there carries a wrong
 sentence; ``failed`` finds such lines, and a test runs it over every committed notebook.
 
 A check's tolerance covers the rounding of the quoted digits and must exceed, ten times over,
@@ -17,13 +18,12 @@ import numpy as np
 PREFIX = "as quoted:"
 
 
-def check(what: str, value, quoted, rtol: float, atol: float = 0.0) -> bool:
-    """Print and return whether ``value`` is ``quoted`` to ``rtol`` relative (or ``atol``
-    absolute) in every entry."""
+def check(what: str, value, quoted, rtol: float, atol: float = 0.0) -> None:
+    """Print whether ``value`` is ``quoted`` to ``rtol`` relative (or ``atol`` absolute) in
+    every entry."""
     ok = bool(np.allclose(np.asarray(value, dtype=float), np.asarray(quoted, dtype=float), rtol=rtol, atol=atol))
     within = " or ".join(t for t in (f"{100 * rtol:g}%" if rtol else "", f"{atol:g}" if atol else "") if t)
     print(f"{PREFIX} {what} {quoted} (to {within}): {ok}")
-    return ok
 
 
 def failed(lines) -> list[str]:
