@@ -58,21 +58,30 @@ def _steps(n: int) -> str:
     return f"{n / 1e6:g}M" if n >= 1e6 else f"{n / 1e3:g}k"
 
 
-def _verdicts(fig: grid.Figure, budget: str) -> list[verdicts.Verdict] | None:
+def _verdicts(fig: grid.Figure, budget: str, required: bool) -> list[verdicts.Verdict] | None:
+    """The claims' verdicts of ``fig`` at ``budget``; None where its runs are not all on disk and
+    the budget is not ``required`` (a ``required`` budget then raises, naming what is missing)."""
     if fig.runs_at is not None and budget not in fig.runs_at:
         return None
     if fig.runs_at is None and not on_disk(fig.id, budget):
-        return None
+        if not required:
+            return None
+        missing = [experiments.run_id(r.cfg) for r in experiments.missing_runs(fig.id, budget)]
+        raise FileNotFoundError(
+            f"{len(missing)} run(s) of {fig.id} at budget {budget!r} are not on disk in "
+            f"{experiments.runs_dir(budget) / 'runs'} (first: {', '.join(missing[:3])}); train them with "
+            f"`python -m oapo_lite reproduce --budget {budget} --figures {fig.id}`")
     return verdicts.claims(fig, experiments.read_figure(fig.id, budget, skip_missing=True)[0])
 
 
 def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
     """Every claim of the paper's experiments with its notebook, budget, verdict at the committed
     budget (``cpu``: 5 seeds on the mazes) and at 20 seeds where those runs exist, and why.
-    Nothing is trained; runs not on disk leave their claim not testable."""
+    Nothing is trained; a figure whose first-budget runs are missing raises naming them, and a
+    figure that declares its runs per env (``runs_at``) leaves a claim with no run not testable."""
     rows = []
     for fig in (f for f in grid.GRID if f.claims):
-        first, second = (_verdicts(fig, b) for b in budgets)
+        first, second = _verdicts(fig, budgets[0], required=True), _verdicts(fig, budgets[1], required=False)
         for k, claim in enumerate(fig.claims):
             env = f"{fig.claims_per_env}{claim[0]}" if fig.claims_per_env else None
             v, w = first[k], None if second is None else second[k]

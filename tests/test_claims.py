@@ -32,6 +32,13 @@ def test_the_readme_carries_the_claims_table_the_data_gives():
     assert block.count("\n") == sum(len(f.claims) for f in grid.GRID) + 1  # a header, a rule, a row per claim
 
 
+def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    first = next(f for f in grid.GRID if f.claims and f.runs_at is None)
+    with pytest.raises(FileNotFoundError, match=rf"run\(s\) of {first.id} at budget 'cpu' are not on disk .*reproduce"):
+        claims.glance()
+
+
 def test_glance_budgets_are_shares_of_the_paper():
     assert claims.budget_share("fig3b", None) == "240k steps x 5 seeds; our budget, the paper gives none"
     assert claims.budget_share("fig6b", "grf:academy_3_vs_1_with_keeper") == \
