@@ -55,20 +55,16 @@ grf: .venv/grf-installed
 reproduce: venv
 	$(PY) -m oapo_lite reproduce --budget $(BUDGET)
 
-# nbval: the committed notebook outputs, executed again here and compared as text.
-NBVAL := $(PY) -m pytest -q -p no:cacheprovider --nbval --nbval-current-env --nbval-sanitize-with notebooks/sanitize.cfg
-# A second numeric path on the same machine: MKL's compatible (SSE2) code path and ATen's AVX2
-# kernels move the last digits of float32 work, as another CPU does. Outputs compared by nbval
-# must not move with them (ASSUMPTIONS.md, "Across machines").
-SECOND_NUMERIC_PATH := MKL_CBWR=COMPATIBLE ATEN_CPU_CAPABILITY=avx2
-
 # tests/test_book.py builds the book and opens every page in headless Chromium; tests/test_grf.py
-# needs the real GRF engine.
+# needs the real GRF engine. tests/numeric_paths.py runs the unit tests again, and nbval (the
+# committed notebook outputs, executed again here and compared as text), under numeric paths that
+# pick other floating-point kernels on this machine, as another CPU would; it prints how many
+# compared cells moved on each (ASSUMPTIONS.md, "Across machines").
 test: venv book-deps browser grf
 	$(PY) -m pytest -q tests
+	$(PY) tests/numeric_paths.py unit
 	$(PY) -m oapo_lite reproduce --budget smoke --check
-	$(NBVAL) notebooks
-	$(SECOND_NUMERIC_PATH) $(NBVAL) notebooks
+	$(PY) tests/numeric_paths.py nbval
 
 clean:
 	rm -rf .venv build figures/smoke

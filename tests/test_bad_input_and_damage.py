@@ -12,7 +12,6 @@ import time
 import numpy as np
 import pandas as pd
 import pytest
-import torch
 
 from oapo_lite import __main__ as cli, grid
 from oapo_lite import experiments, store
@@ -306,17 +305,3 @@ def test_a_config_value_of_the_wrong_type_is_named(bad, words):
 def test_numpy_scalars_are_valid_config_values():
     cfg = TrainConfig(steps=np.int64(3200), seed=np.int32(1), reuse_lambda=np.float64(0.5), hidden=(np.int64(32),))
     assert cfg.hidden == (32,) and cfg.n_iterations == 2
-
-
-def test_the_second_numeric_path_changes_float32_digits():
-    """``make test`` runs nbval again under MKL's compatible code path and ATen's AVX2 kernels
-    (see the Makefile): it is a test of CPU independence only where those change the digits of
-    the float32 work the notebooks do."""
-    code = ("import torch; g = torch.Generator().manual_seed(0); a = torch.randn(256, 163, generator=g); "
-            "w = torch.randn(163, 64, generator=g); print(repr((a @ w).tanh().sum(0).tolist()))")
-    if not torch.backends.mkl.is_available():
-        pytest.skip("torch does not use MKL here: the second path moves only ATen's kernels")
-    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                           env={**os.environ, **extra}).stdout
-            for extra in ({}, {"MKL_CBWR": "COMPATIBLE", "ATEN_CPU_CAPABILITY": "avx2"})]
-    assert runs[0] != runs[1]

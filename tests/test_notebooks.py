@@ -1,0 +1,86 @@
+"""What the committed notebooks print, read as text: no check of a number the text quotes says
+False, and the numeric paths that ``make test`` runs nbval under are other kernels, each one
+(``numeric_paths.py``)."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+import torch
+
+from oapo_lite import quoted
+
+import numeric_paths
+
+NOTEBOOKS = sorted((Path(__file__).resolve().parent.parent / "notebooks").glob("*.ipynb"))
+
+
+def printed_lines(notebook: Path) -> list[str]:
+    """Every line a committed notebook printed (streams and plain-text results)."""
+    lines = []
+    for cell in nbformat.read(notebook, as_version=4).cells:
+        for out in cell.get("outputs", ()):
+            text = out.get("text") or out.get("data", {}).get("text/plain", "")
+            lines += "".join(text).splitlines()
+    return lines
+
+
+def test_no_committed_notebook_prints_a_failed_check_of_its_quoted_numbers():
+    checks = {nb.name: [line for line in printed_lines(nb) if line.startswith(quoted.PREFIX)] for nb in NOTEBOOKS}
+    assert sum(map(len, checks.values())) >= 10, "the notebooks check their quoted numbers with quoted.check"
+    failed = {name: quoted.failed(lines) for name, lines in checks.items() if quoted.failed(lines)}
+    assert not failed, f"a committed notebook says a quoted number is wrong: {failed}"
+
+
+def test_a_quoted_check_says_false_and_is_found(capsys):
+    quoted.check("K", [[0, 0.0263]], [[0, 0.0263]], rtol=0.01)
+    quoted.check("ratio", 1.05, 1.0, rtol=0.01)
+    quoted.check("two", [0.5, 2.0], [0.5, 1.0], rtol=0.01)  # one entry out is out
+    quoted.check("near 0", 0.0004, 0.0, rtol=0.01, atol=0.0005)
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "as quoted: K [[0, 0.0263]] (to 1%): True"
+    assert lines[3] == "as quoted: near 0 0.0 (to 1% or 0.0005): True"
+    assert quoted.failed(lines) == lines[1:3] and lines[1].endswith("False")
+
+
+def test_the_nbval_report_counts_compared_cells_and_moved_ones(tmp_path):
+    nb = nbformat.v4.new_notebook()
+    out = [nbformat.v4.new_output("stream", text="1\n")]
+    nb.cells = [nbformat.v4.new_code_cell("print(1)", outputs=out),
+                nbformat.v4.new_code_cell("# NBVAL_IGNORE_OUTPUT\nprint(1)", outputs=out),
+                nbformat.v4.new_code_cell("print(1)", outputs=out, metadata={"tags": ["nbval-ignore-output"]}),
+                nbformat.v4.new_code_cell("x = 1"),
+                nbformat.v4.new_markdown_cell("text")]
+    nbformat.write(nb, tmp_path / "a.ipynb")
+    assert numeric_paths.compared_cells(tmp_path / "a.ipynb") == 1
+    (tmp_path / "j.xml").write_text(
+        '<testsuites><testsuite><testcase classname="notebooks.a.ipynb" name="Cell 0"><failure/></testcase>'
+        '<testcase classname="notebooks.a.ipynb" name="Cell 1"/>'
+        '<testcase classname="notebooks.b_c.ipynb" name="Cell 3"><failure/></testcase></testsuite></testsuites>')
+    assert numeric_paths.moved_cells(tmp_path / "j.xml") == {"a.ipynb": 1, "b_c.ipynb": 1}
+
+
+FLOAT32_WORK = ("import torch; g = torch.Generator().manual_seed(0); a = torch.randn(256, 163, generator=g); "
+                "w = torch.randn(163, 64, generator=g); "
+                "print(repr([(a @ w).tanh().sum(0).tolist(), torch.log_softmax(a, 1).sum(0).tolist()]))")
+
+
+@pytest.mark.parametrize("path", [p for p in numeric_paths.paths() if p != "default"])
+def test_each_numeric_path_moves_the_digits_of_float32_work(path):
+    """A path under which the loop's kind of float32 work (a product, tanh, sums, log-softmax)
+    comes out as on the default one would make its nbval run a repeat, not a test."""
+    if path == "avx2" and torch.backends.cpu.get_cpu_capability() != "AVX512":
+        pytest.skip("this CPU's own kernels are AVX2 ones: the avx2 path is its default")
+    runs = [subprocess.run([sys.executable, "-c", FLOAT32_WORK], capture_output=True, text=True, check=True,
+                           env=numeric_paths.environment(name)).stdout for name in ("default", path)]
+    assert runs[0] != runs[1]
+
+
+def test_a_path_sets_its_variables_and_clears_the_others(monkeypatch):
+    monkeypatch.setenv("MKL_CBWR", "COMPATIBLE")
+    monkeypatch.setenv("ATEN_CPU_CAPABILITY", "avx2")
+    assert "MKL_CBWR" not in numeric_paths.environment("default")
+    env = numeric_paths.environment("avx2")
+    assert env["ATEN_CPU_CAPABILITY"] == "avx2" and "MKL_CBWR" not in env and env["PATH"] == os.environ["PATH"]
