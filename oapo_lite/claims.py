@@ -62,14 +62,17 @@ def _verdicts(fig: grid.Figure, budget: str, required: bool) -> list[verdicts.Ve
     """The claims' verdicts of ``fig`` at ``budget``; None where its runs are not all on disk and
     the budget is not ``required`` (a ``required`` budget then raises, naming what is missing)."""
     if fig.runs_at is not None and budget not in fig.runs_at:
+        if required:
+            raise ValueError(f"{fig.id} has no runs at budget {budget!r}; it runs at {list(fig.runs_at)}")
         return None
     if fig.runs_at is None and not on_disk(fig.id, budget):
         if not required:
             return None
-        missing = [experiments.run_id(r.cfg) for r in experiments.missing_runs(fig.id, budget)]
+        missing = experiments.missing_runs(fig.id, budget)
         raise FileNotFoundError(
             f"{len(missing)} run(s) of {fig.id} at budget {budget!r} are not on disk in "
-            f"{experiments.runs_dir(budget) / 'runs'} (first: {', '.join(missing[:3])}); train them with "
+            f"{experiments.run_path(missing[0].cfg, budget).parent} (first: "
+            f"{', '.join(experiments.run_id(r.cfg) for r in missing[:3])}); train them with "
             f"`python -m oapo_lite reproduce --budget {budget} --figures {fig.id}`")
     return verdicts.claims(fig, experiments.read_figure(fig.id, budget, skip_missing=True)[0])
 

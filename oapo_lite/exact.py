@@ -193,12 +193,12 @@ def log_softmax(logits: np.ndarray) -> np.ndarray:
 # float64's smallest normal number exp rounds to a denormal or to 0 by the CPU's code path, and a
 # 0 makes every KL against that table infinite (Lemma 1's bound -inf on one machine, finite on
 # another). So no probability is stored below it.
-LOG_TINY = float(np.log(np.finfo(float).tiny))
+TINY = np.finfo(float).tiny
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
     """Policy tables from logits, along the last axis; no entry below float64's smallest normal number."""
-    return np.exp(np.maximum(log_softmax(logits), LOG_TINY))
+    return np.maximum(np.exp(log_softmax(logits)), TINY)
 
 
 def _tables(game: DecPOMDP, pis) -> np.ndarray:

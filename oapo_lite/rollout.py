@@ -74,7 +74,7 @@ def distinct_rows(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     decides), and only the distinct rows are sorted by their bytes. The batch's rows are never
     copied whole: a fresh megabyte costs more in page faults than all the rest."""
     raw = [np.ascontiguousarray(c).view(np.uint8) for c in columns]
-    _, first, inverse = np.unique(_row_hash(columns), return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(_row_hash(raw), return_index=True, return_inverse=True)
     if not all(_rows_equal(r, first[inverse]) for r in raw):  # two different rows with one hash
         _, first, inverse = np.unique(_keys(np.concatenate(raw, 1)), return_index=True, return_inverse=True)
         return first, inverse
@@ -89,18 +89,17 @@ def _keys(raw: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).ravel()
 
 
-def _row_hash(columns: tuple[np.ndarray, ...], chunk: int = 512) -> np.ndarray:
-    """A 64-bit hash of every row: its bit patterns (32-bit words, or bytes where a row's width is
-    no multiple of 4) times fixed random odd numbers, summed modulo 2**64. Integer arithmetic, so
-    equal rows get equal hashes on any CPU, whatever kernel sums them (a floating-point product
-    rounded one row differently by its place in the batch under MKL's AVX2 kernels); different
-    rows may share one, and ``distinct_rows`` checks. A slice of rows at a time: a whole
-    batch widened to 64 bits would be a fresh megabyte again."""
+def _row_hash(raw: list[np.ndarray], chunk: int = 512) -> np.ndarray:
+    """A 64-bit hash of every row of 2-D uint8 arrays (the columns' bytes, side by side): the
+    row's 32-bit words (bytes where a width is no multiple of 4) times fixed random odd numbers,
+    summed modulo 2**64. Integer arithmetic, so equal rows get equal hashes on any CPU, whatever
+    kernel sums them (a floating-point product rounded one row differently by its place in the
+    batch under MKL's AVX2 kernels); different rows may share one, and ``distinct_rows`` checks.
+    A slice of rows at a time: a whole batch widened to 64 bits would be a fresh megabyte again."""
     rng = np.random.default_rng(0)
-    h = np.zeros(len(columns[0]), np.uint64)
-    for c in columns:
-        raw = np.ascontiguousarray(c).reshape(len(c), -1).view(np.uint8)
-        words = raw.view(np.uint32) if raw.shape[1] % 4 == 0 else raw
+    h = np.zeros(len(raw[0]), np.uint64)
+    for r in raw:
+        words = r.view(np.uint32) if r.shape[1] % 4 == 0 else r
         odd = rng.integers(0, 2**64, words.shape[1], np.uint64, endpoint=False) | np.uint64(1)
         for i in range(0, len(h), chunk):
             h[i:i + chunk] += words[i:i + chunk].astype(np.uint64) @ odd

@@ -37,6 +37,9 @@ def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
     first = next(f for f in grid.GRID if f.claims and f.runs_at is None)
     with pytest.raises(FileNotFoundError, match=rf"run\(s\) of {first.id} at budget 'cpu' are not on disk .*reproduce"):
         claims.glance()
+    engine = next(f for f in grid.GRID if f.claims and f.runs_at is not None and "paper20" not in f.runs_at)
+    with pytest.raises(ValueError, match=rf"{engine.id} has no runs at budget 'paper20'"):
+        claims._verdicts(engine, "paper20", required=True)
 
 
 def test_glance_budgets_are_shares_of_the_paper():

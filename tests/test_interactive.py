@@ -103,7 +103,7 @@ def test_notebook_05_slider_cell_draws_statically(monkeypatch):
     monkeypatch.setitem(sys.modules, "ipywidgets", None)
     K3 = np.array([[0, 1.0912, 1.0655], [1.2689, 0, 0.0085], [1.2955, 0.0084, 0]])
     namespace = dict(np=np, plt=plt, reuse=reuse, reuse_heatmap=reuse_heatmap, names=["red", "black", "blue"],
-                     K3=K3, cfg3=SimpleNamespace(steps=48_000, seed=0))
+                     K3=K3, cfg=SimpleNamespace(steps=48_000), cfg3=SimpleNamespace(seed=0))
     plt.close("all")
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*non-interactive.*")  # plt.show() under Agg

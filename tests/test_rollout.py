@@ -27,7 +27,7 @@ def repeating_rows(rng: np.random.Generator, rows: int, width: int) -> np.ndarra
 @pytest.mark.parametrize("one_hash", [False, True], ids=["hashed", "every row one hash"])
 def test_distinct_rows_are_np_unique_over_the_rows_bytes(monkeypatch, one_hash):
     if one_hash:  # rows that share a hash without being equal: np.unique must decide
-        monkeypatch.setattr(rollout, "_row_hash", lambda columns: np.zeros(len(columns[0]), np.uint64))
+        monkeypatch.setattr(rollout, "_row_hash", lambda raw: np.zeros(len(raw[0]), np.uint64))
     rng = np.random.default_rng(0)
     for rows, width in ((1, 1), (7, 3), (3200, 72), (1600, 163)):
         obs = repeating_rows(rng, rows, width)
@@ -62,13 +62,16 @@ def test_states_store_each_distinct_state_once_and_give_back_every_step():
 
 def test_the_row_hash_of_a_row_is_the_same_wherever_it_sits():
     """Exact by construction: a row alone, and the same row at every place of a batch of other
-    rows, hashes alike (a floating-point product could round it by its place in the batch)."""
+    rows, hashes alike (a floating-point product could round it by its place in the batch); rows
+    that differ in their bytes hash apart."""
     rng = np.random.default_rng(3)
+    as_bytes = lambda *columns: [np.ascontiguousarray(c).view(np.uint8) for c in columns]
     for width in (1, 3, 75, 163):
         batch = repeating_rows(rng, 3000, width)
         masks = rng.random((3000, 5)) < 0.5
         row, mask = batch[:1], masks[:1]
         batch[::7], masks[::7] = row, mask
-        alone = rollout._row_hash((row, mask))
-        np.testing.assert_array_equal(rollout._row_hash((batch, masks))[::7], np.repeat(alone, len(batch[::7])))
-        assert len(np.unique(rollout._row_hash((batch[::7], masks[::7])))) == 1
+        hashes = rollout._row_hash(as_bytes(batch, masks))
+        np.testing.assert_array_equal(hashes[::7], np.repeat(rollout._row_hash(as_bytes(row, mask)), len(batch[::7])))
+        assert len(np.unique(hashes)) == len(unique_by_bytes(batch, masks)[0])
+    assert rollout._row_hash(as_bytes(np.zeros((0, 4), np.float32))).shape == (0,)
