@@ -39,10 +39,11 @@ IGNORED = ("NBVAL_IGNORE_OUTPUT", "NBVAL_SKIP")  # as comments in a cell, or as 
 
 
 def numpy_targets(keep) -> str:
-    """numpy's SIMD targets found on this CPU that ``keep`` rejects, spelled for
-    ``NPY_DISABLE_CPU_FEATURES``."""
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-    return " ".join(f for f in __cpu_dispatch__ if __cpu_features__.get(f) and not keep(f))
+    """numpy's SIMD targets that ``keep`` rejects, spelled for ``NPY_DISABLE_CPU_FEATURES``: from
+    the targets it was built with, not those it runs now (a process on a path has turned some
+    off), and numpy accepts a target this CPU lacks."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__
+    return " ".join(t for t in __cpu_dispatch__ if not keep(t))
 
 
 def paths() -> dict[str, dict[str, str]]:
