@@ -7,7 +7,8 @@ import pandas as pd
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
 YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arrival rewards)",
-           "eval_return": "episode return (evaluation)", "eval_success": "win rate"}
+           "eval_return": "episode return (evaluation)", "eval_success": "win rate",
+           "peer_share": "peer share: weight on other agents' experience"}
 # One colour per algorithm and per agent in every figure. The agents are named after their
 # colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
 ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",

@@ -33,6 +33,14 @@ def peer_share(m) -> float:
     return float(m[~np.eye(len(m), dtype=bool)].sum() / len(m))
 
 
+def nearest_peer(kl) -> np.ndarray:
+    """Per learner i, min over the other agents j of K[i, j]: the distance that Eq. 9's gate
+    compares with sigma first (i reuses someone iff it is <= sigma, where every pair is allowed);
+    inf for a lone agent, NaN where K was not measured."""
+    kl = np.asarray(kl, dtype=float)
+    return np.where(np.eye(len(kl), dtype=bool), np.inf, kl).min(1)
+
+
 def oapo_matrix(kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.ndarray | None = None) -> np.ndarray:
     """Eq. 9: the reuse distribution of every learner, one row each.
 

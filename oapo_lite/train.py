@@ -87,7 +87,15 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
     gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 3, it))
     ret, success = episode_scores(state.actors, state.owner, state.eval_env, gen, cfg.max_steps)
     return {**cfg.flat(), "git_rev": revision, "iteration": it, "step": it * cfg.iteration_steps,
-            "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics}
+            "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics,
+            **({"iterations_reusing": iterations_reusing(state.history)} if "peer_share" in metrics else {})}
+
+
+def iterations_reusing(history: list[dict]) -> float:
+    """The share of the run's iterations so far in which some learner gave another agent's
+    experience a positive weight (peer share > 0): how much of the run reuse operated in, read
+    from every iteration, not the evaluated ones alone."""
+    return float(np.mean([h["peer_share"] > 0 for h in history]))
 
 
 def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, clock: dict) -> pd.DataFrame:

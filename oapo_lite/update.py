@@ -309,6 +309,8 @@ class Learner:
             "objective": float(np.mean(objectives)), "value_loss": critic_loss,
             "trpo_kl": mean_or_nan(accepted), "trpo_accepted": len(accepted),
             "kl_matrix": np.round(K, 6), "reuse_matrix": np.round(M, 6),
+            # reuse made visible at every iteration (the matrices reach the results rows at evaluations only)
+            "peer_share": round(reuse.peer_share(M), 6), "kl_nearest": np.round(reuse.nearest_peer(K), 6),
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
             metrics["agreement"] = np.round(C, 6)

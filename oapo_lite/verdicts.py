@@ -97,6 +97,29 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     return pd.DataFrame(rows)
 
 
+def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per run, from the reuse matrix M of its evaluated iterations: how many there are,
+    the share of them in which some learner gave another agent's experience a positive weight
+    (``reusing``), the mean peer share (M's off-diagonal mass per learner) over them, and the
+    last step at which one did (NaN: never). ``all_iterations``: the share over every iteration,
+    where the run recorded it (``iterations_reusing``, at its last evaluation), else NaN. Runs
+    without a reuse matrix (SEAC, SePS) have no row."""
+    from oapo_lite.reuse import peer_share
+
+    rows = []
+    for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
+        run = run[run["reuse_matrix"].notna()]
+        if run.empty:  # SEAC, SePS: no reuse matrix
+            continue
+        share = run["reuse_matrix"].map(peer_share).to_numpy(float)
+        reusing = run["step"].to_numpy()[share > 0]
+        every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run and len(run) else np.nan
+        rows.append({"label": label, "seed": seed, "evaluations": len(run), "reusing": float(np.mean(share > 0)),
+                     "mean_peer_share": float(share.mean()),
+                     "last_reuse_step": float(reusing.max()) if len(reusing) else np.nan, "all_iterations": float(every)})
+    return pd.DataFrame(rows)
+
+
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
     gain = (runs["final"] - runs["initial"]).groupby(runs["label"], sort=False)

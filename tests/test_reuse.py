@@ -157,3 +157,13 @@ def test_peer_share_of_the_three_rules(n):
     assert np.isclose(reuse.peer_share(reuse.mappo_matrix(n)), (n - 1) / n)
     close = reuse.oapo_matrix(np.zeros((n, n)), sigma=0.1, reuse_lambda=0.7)  # every peer within sigma
     assert np.isclose(reuse.peer_share(close), 0.0 if n == 1 else 0.3)
+
+
+def test_nearest_peer_is_the_smallest_distance_to_another_agent():
+    kl = np.array([[0.0, 0.3, 0.05], [2.0, 0.0, 1.0], [1.5, 0.4, 0.0]])
+    np.testing.assert_array_equal(reuse.nearest_peer(kl), [0.05, 1.0, 0.4])
+    assert np.isnan(reuse.nearest_peer(np.full((2, 2), np.nan))).all()  # K not measured this iteration
+    assert reuse.nearest_peer(np.zeros((1, 1))).tolist() == [np.inf]  # a lone agent has no peer
+    # the gate: a learner reuses someone exactly when its nearest peer is within sigma
+    for sigma in (0.04, 0.05, 0.5, 1.5):
+        np.testing.assert_array_equal(1 - np.diag(reuse.oapo_matrix(kl, sigma, 0.7)) > 0, reuse.nearest_peer(kl) <= sigma)

@@ -10,7 +10,7 @@ import torch
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from oapo_lite import __main__ as cli
+from oapo_lite import __main__ as cli, reuse
 from oapo_lite.envs import MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
 from oapo_lite.nets import Actors, Categorical
@@ -511,3 +511,20 @@ def test_value_norm_off_regresses_on_raw_returns(tmp_path):
     assert not np.allclose(on["value_loss"].iloc[1:], off["value_loss"].iloc[1:])
     with pytest.raises(ValueError, match="lr_anneal"):
         TrainConfig(lr_anneal=1)
+
+
+@pytest.mark.parametrize("algo", ["oappo", "happo", "mappo"])
+def test_every_iteration_records_its_reuse_and_the_rows_its_share(tmp_path, algo):
+    """The history holds every iteration's peer share (M's off-diagonal mass) and each learner's
+    nearest distance; an evaluation row holds the share of iterations so far with any reuse."""
+    rows = _run(tmp_path, algo, algo=algo, **{**SMALL_BR, "steps": 1200})
+    history = load_history(tmp_path / algo)
+    assert len(history) == 6
+    for h in history:
+        assert h["peer_share"] == pytest.approx(reuse.peer_share(h["reuse_matrix"]), abs=1e-6)
+        if not np.isnan(h["kl_matrix"]).any():
+            np.testing.assert_allclose(h["kl_nearest"], reuse.nearest_peer(h["kl_matrix"]), atol=1e-6)
+    share = {"oappo": 0.3, "happo": 0.0, "mappo": 0.5}[algo]  # untrained nets are within sigma of each other
+    assert [h["peer_share"] for h in history] == pytest.approx([share] * 6)
+    assert rows["iterations_reusing"].isna().iloc[0]  # before any iteration
+    assert rows["iterations_reusing"].iloc[1:].tolist() == [float(share > 0)] * 2
