@@ -83,6 +83,9 @@ class TrainConfig:
     # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
     # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
     reuse_adapt: str | None = None
+    # iterations at the start with M = I (no reuse) before Eq. 9 applies: the control for "is the
+    # reuse of the first iterations, while untrained nets look alike, harmful?" (issue 31)
+    reuse_warmup: int = 0
     kl_threshold: float = 0.01  # TRPO delta
     cg_iters: int = 10
     cg_damping: float = 0.1
@@ -134,6 +137,10 @@ class TrainConfig:
                      "eval_every", "eval_episodes", "max_steps", "checkpoint_every", "n_step", "seps_pretrain_steps"):
             whole(name)
         whole("seed", 0)
+        whole("reuse_warmup", 0)
+        if self.reuse_warmup:
+            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
+            need(ALGOS[self.algo].reuse == "oapo", "reuse_warmup", f"0 with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
         need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):

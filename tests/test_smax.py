@@ -14,6 +14,7 @@ from oapo_lite.envs.smax import NOOP, SmaxVec, check  # noqa: E402
 from oapo_lite.nets import Actors  # noqa: E402
 from oapo_lite.config import TrainConfig  # noqa: E402
 from oapo_lite.rollout import sample_actions  # noqa: E402
+from oapo_lite.runstate import load_checkpoint  # noqa: E402
 from oapo_lite.train import train  # noqa: E402
 
 import fakes
@@ -125,3 +126,15 @@ def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_
     resumed = train(cfg, tmp_path / "split", progress=False)
     cols = ["step", "eval_return", "eval_success", "objective", "value_loss"]
     assert resumed[cols].equals(full[cols])
+
+
+def test_oappo_warmed_up_for_the_whole_run_is_bitwise_happo_on_smax(env, tmp_path):
+    """The same identity on an engine with action masks and agents that die (``active``)."""
+    cfg = dict(env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10, eval_every=3, eval_episodes=N,
+               max_steps=MAX_STEPS, hidden=(16,))
+    train(TrainConfig(algo="happo", **cfg), tmp_path / "happo", progress=False)
+    train(TrainConfig(algo="oappo", reuse_warmup=3, **cfg), tmp_path / "oappo", progress=False)
+    train(TrainConfig(algo="oappo", **cfg), tmp_path / "reuse", progress=False)
+    a, b, c = (load_checkpoint(tmp_path / name)["actors"] for name in ("happo", "oappo", "reuse"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)  # without the warm-up, reuse changes the update

@@ -158,6 +158,21 @@ def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
     assert not _same(happo, _params(tmp_path, "reuse"))  # reuse does change the update
 
 
+def test_oappo_warmed_up_for_the_whole_run_is_bitwise_happo_and_reuses_after_its_warm_up(tmp_path):
+    """``reuse_warmup`` iterations with M = I: over a whole run, OAPPO is HAPPO bit for bit; with a
+    warm-up of 2 of 4 iterations, the first two reuse nothing and the last two do."""
+    small = {**SMALL_BR, "steps": 800}  # 4 iterations of 200 steps
+    _run(tmp_path, "happo", algo="happo", **small)
+    _run(tmp_path, "whole", algo="oappo", reuse_warmup=4, **small)
+    assert _same(_params(tmp_path, "happo"), _params(tmp_path, "whole"))
+    rows = _run(tmp_path, "half", algo="oappo", reuse_warmup=2, **small)
+    assert [h["peer_share"] for h in load_history(tmp_path / "half")] == pytest.approx([0, 0, 0.3, 0.3])
+    assert rows["iterations_reusing"].iloc[-1] == 0.5
+    assert not _same(_params(tmp_path, "happo"), _params(tmp_path, "half"))
+    with pytest.raises(ValueError, match="reuse_warmup"):
+        TrainConfig(algo="happo", reuse_warmup=3)
+
+
 def test_oappo_with_one_shared_network_and_uniform_reuse_is_bitwise_mappo(tmp_path):
     """A shared net is at KL 0 from itself, so Eq. 9 spreads each seat's row evenly: the
     mean over seats is 1/n for every source, MAPPO's matrix."""
