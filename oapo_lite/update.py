@@ -290,7 +290,7 @@ class Learner:
         # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
         K = (policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
              if spec.reuse == "oapo" or cfg.evaluates(it + 1) else np.full((n, n), np.nan))
-        M = (np.eye(n) if it < cfg.reuse_warmup  # (only Eq. 9's algorithms have a warm-up)
+        M = (np.eye(n) if it < cfg.reuse_warmup  # the control: no reuse while untrained nets look alike
              else reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.reuse_lambda, self.allowed))
         if cfg.reuse_adapt is not None:
             G = source_gradients(actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip,

@@ -43,6 +43,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from oapo_lite.reuse import peer_share
+
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
@@ -104,8 +106,6 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     last step at which one did (NaN: never). ``all_iterations``: the share over every iteration,
     where the run recorded it (``iterations_reusing``, at its last evaluation), else NaN. Runs
     without a reuse matrix (SEAC, SePS) have no row."""
-    from oapo_lite.reuse import peer_share
-
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         run = run[run["reuse_matrix"].notna()]
@@ -113,7 +113,7 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
             continue
         share = run["reuse_matrix"].map(peer_share).to_numpy(float)
         reusing = run["step"].to_numpy()[share > 0]
-        every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run and len(run) else np.nan
+        every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run else np.nan
         rows.append({"label": label, "seed": seed, "evaluations": len(run), "reusing": float(np.mean(share > 0)),
                      "mean_peer_share": float(share.mean()),
                      "last_reuse_step": float(reusing.max()) if len(reusing) else np.nan, "all_iterations": float(every)})
