@@ -123,6 +123,11 @@ class TrainConfig:
             x = getattr(self, name)
             need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name, allowed)
 
+        def eq9_only(name: str, off: str):
+            """``name`` set only for an algorithm that reuses by Eq. 9 (the others have no M to change)."""
+            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
+            need(ALGOS[self.algo].reuse == "oapo", name, f"{off} with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
+
         need(isinstance(self.algo, str) and self.algo in ALGOS, "algo", str(sorted(ALGOS)))
         need(self.env_fn is None or callable(self.env_fn), "env_fn", "None or a callable that returns a PettingZoo "
                                                                        "ParallelEnv")
@@ -139,8 +144,7 @@ class TrainConfig:
         whole("seed", 0)
         whole("reuse_warmup", 0)
         if self.reuse_warmup:
-            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
-            need(ALGOS[self.algo].reuse == "oapo", "reuse_warmup", f"0 with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
+            eq9_only("reuse_warmup", "0")
         need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):
@@ -162,10 +166,8 @@ class TrainConfig:
         need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
              f"None or one of {list(adaptive.ADAPT_RULES)}")
         if self.reuse_adapt is not None:
-            # the rule rescales Eq. 9's matrix between separate learners; others have no Eq. 9 to adapt
-            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
-            need(ALGOS[self.algo].reuse == "oapo", "reuse_adapt",
-                 f"None with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
+            # the rule rescales Eq. 9's matrix between separate learners
+            eq9_only("reuse_adapt", "None")
             need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
                  f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")

@@ -120,6 +120,16 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
+    """``reuse_per_run`` per label: seeds, evaluated iterations per run, the share of them that
+    reused and the mean peer share (means over seeds), the last step any seed reused, and the
+    share over every iteration where the runs recorded it."""
+    return reuse_per_run(df).groupby("label", sort=False).agg(
+        seeds=("seed", "size"), evaluations=("evaluations", "first"), reusing=("reusing", "mean"),
+        mean_peer_share=("mean_peer_share", "mean"), last_reuse_step=("last_reuse_step", "max"),
+        all_iterations=("all_iterations", "mean"))
+
+
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
     gain = (runs["final"] - runs["initial"]).groupby(runs["label"], sort=False)
