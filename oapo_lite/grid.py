@@ -137,6 +137,10 @@ SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 # App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO) and
 # direct reuse (SEAC) on homogeneous agents.
 FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
+HALFCHEETAH = "mamujoco:HalfCheetah-2x3"
+# the cpu batch on HalfCheetah: 8 copies x 250 steps, MuJoCo's 1,000-step episodes
+MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)
+MAMUJOCO_SMOKE = dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100))
 # Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
 FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
@@ -234,14 +238,13 @@ GRID = (
            section="6.2", notebook="20_smax_fig4",
            reference="HARL's steps for the map"),
     # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
-    Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env="mamujoco:HalfCheetah-2x3"),
+    Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env=HALFCHEETAH),
            runs_at=ENGINE_BUDGETS, budgets={
-               "smoke": dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100)),
+               "smoke": MAMUJOCO_SMOKE,
                # 1M steps: 10% of HARL's scale, where every curve has left its initial return (at 200k
                # MAPPO and SEAC had not); an evaluation every 20
                # iterations (40k steps) costs about 7% of the run
-               "cpu": dict(steps=1_000_000, eval_every=20, eval_episodes=3,
-                           config=dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)),
+               "cpu": dict(steps=1_000_000, eval_every=20, eval_episodes=3, config=MAMUJOCO_CPU),
                "paper": dict(steps=10_000_000, eval_every=25, eval_episodes=10,
                              config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
            }, metric=RETURN, claims=(
@@ -253,6 +256,14 @@ GRID = (
                (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
                (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)")),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+    # Issue 31: does OAPPO's early reuse (its gate is open while the untrained nets look alike)
+    # lower the return? Ten seed pairs at 600k steps, each point 10 episodes, so that an
+    # interval on the final return's difference can decide it; not a claim of the paper.
+    Figure("fig_early_reuse", (("happo", dict(algo="happo")), ("oappo", dict(algo="oappo"))),
+           common=dict(env=HALFCHEETAH), runs_at=("smoke", "cpu"), budgets={
+               "smoke": MAMUJOCO_SMOKE,
+               "cpu": dict(seeds=tuple(range(10)), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
     # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run, so 18
     # runs of 32k steps on 3_vs_1_with_keeper (the scenario HARL learns fastest) fit 2 hours.
