@@ -51,7 +51,7 @@ def train_parser() -> argparse.ArgumentParser:
     special = {
         "hidden": dict(type=int, nargs="+"),
         "allowed": dict(type=_none_or(str), help="none or a scheme: NR, UR, RR, AR"),
-        "shared": dict(type=_none_or(_bool), help="none (the algorithm's choice), true or false"),
+        "networks": dict(type=_none_or(str), help="none (the algorithm's choice), agent, type or one"),
         "bootstrap_truncation": dict(type=_none_or(_bool), help="none (no on the built-in mazes), true or false"),
         "reuse_adapt": dict(type=_none_or(str), help="none (Eq. 9 as written), gradient, gradient_sign or "
                                                      "gradient_test (oapo_lite/adaptive.py)"),
@@ -66,7 +66,8 @@ def train_parser() -> argparse.ArgumentParser:
     for f in dataclasses.fields(TrainConfig):
         if f.name == "env_fn":
             continue  # a Python callable: use the API
-        options = special.get(f.name, dict(type=type(f.default)))
+        # type=bool would read "false" as True: a non-empty string
+        options = special.get(f.name, dict(type=_bool if isinstance(f.default, bool) else type(f.default)))
         flags = dict.fromkeys([f"--{f.name.replace('_', '-')}", f"--{f.name}"])  # --n-envs and --n_envs
         parser.add_argument(*flags, dest=f.name, default=f.default, **options)
     parser.add_argument("--out", default="runs", help="parent folder of the run folder")

@@ -11,8 +11,11 @@ from typing import Callable
 import numpy as np
 
 from oapo_lite import adaptive
-from oapo_lite.reuse import SCHEMES
+from oapo_lite.reuse import KL_REDUCES, SCHEMES
 from oapo_lite.envs import registry as env_registry
+
+
+NETWORKS = ("agent", "type", "one")  # one network per seat, per kind of seat, for every seat
 
 
 @dataclass(frozen=True)
@@ -76,16 +79,27 @@ class TrainConfig:
     hidden: tuple[int, ...] = (64, 64)
     sigma: float = 0.1  # Eq. 9's KL threshold
     reuse_lambda: float = 0.7  # Eq. 9's lambda: the probability a learner keeps for its own experience
-    kl_reduce: str = "max"
+    kl_reduce: str = "max"  # Eq. 9's statistic of the per-observation KL (reuse.KL_REDUCES)
     reuse_mode: str = "weights"
     allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
-    shared: bool | None = None  # one network for all seats; None: the algorithm's own choice
+    # the actors' networks, issue 31's readings of the paper: "agent" one per seat, "type" one per
+    # kind of seat (the env's agent_types; Eq. 9 then gates reuse across kinds), "one" one for every
+    # seat; None: the algorithm's own (MAPPO one, the others one per seat)
+    networks: str | None = None
     # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
     # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
     reuse_adapt: str | None = None
     # iterations at the start with M = I (no reuse) before Eq. 9 applies: the control for "is the
     # reuse of the first iterations, while untrained nets look alike, harmful?" (issue 31)
     reuse_warmup: int = 0
+    # "net": each network is updated once an iteration, on the mean of its seats' rows of M;
+    # "seat": seat by seat in a random order, each update on its own seat's row of M with the
+    # sequential factor, so a network shared by several seats moves once per seat (HARL's HAPPO
+    # with a shared actor); where every network has one seat the two are the same
+    update_by: str = "net"
+    # the entropy bonus weighted as the own-seat surrogate is (W[i, i] of Eq. 8's weights), so
+    # that reuse does not raise the bonus relative to the learner's own experience
+    entropy_by_weight: bool = False
     kl_threshold: float = 0.01  # TRPO delta
     cg_iters: int = 10
     cg_damping: float = 0.1
@@ -156,19 +170,26 @@ class TrainConfig:
             real(name, lambda x: x >= 0, "a finite number >= 0")
         real("sigma", lambda x: x >= 0, "a number >= 0 (inf: no KL gate)", finite=False)
         real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
-        need(self.kl_reduce in ("max", "mean"), "kl_reduce", "['max', 'mean']")
+        need(self.kl_reduce in KL_REDUCES, "kl_reduce", str(list(KL_REDUCES)))
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
-        for name in ("lr_anneal", "value_norm"):
+        for name in ("lr_anneal", "value_norm", "entropy_by_weight"):
             need(isinstance(getattr(self, name), (bool, np.bool_)), name, "True or False")
-        for name in ("shared", "bootstrap_truncation"):
-            need(getattr(self, name) is None or isinstance(getattr(self, name), (bool, np.bool_)), name,
-                 "None, True or False")
+        need(self.bootstrap_truncation is None or isinstance(self.bootstrap_truncation, (bool, np.bool_)),
+             "bootstrap_truncation", "None, True or False")
+        need(self.networks is None or isinstance(self.networks, str) and self.networks in NETWORKS, "networks",
+             f"None or one of {list(NETWORKS)}")
+        need(self.update_by in ("net", "seat"), "update_by", "['net', 'seat']")
+        if self.update_by == "seat":
+            sequential = sorted(a for a in ALGOS if ALGOS[a].sequential)
+            need(ALGOS[self.algo].sequential, "update_by", f"'net' with algo {self.algo!r}; updating seat by seat "
+                                                           f"needs the sequential factor of {sequential}")
         need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
              f"None or one of {list(adaptive.ADAPT_RULES)}")
         if self.reuse_adapt is not None:
             # the rule rescales Eq. 9's matrix between separate learners
             eq9_only("reuse_adapt", "None")
-            need(not self.shared, "reuse_adapt", "None with shared=True (one network has one gradient)")
+            need(self.network_kind == "agent" and self.update_by == "net", "reuse_adapt",
+                 "None unless every seat has its own network, updated once (networks='agent', update_by='net')")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
                  f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
         mask = "None, an (n, n) bool mask or a scheme in " + str(list(SCHEMES))
@@ -185,8 +206,8 @@ class TrainConfig:
         need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1),
              "seps_clusters", "None or an integer >= 1")
         if ALGOS[self.algo].a2c:
-            need(self.shared is None, "shared", f"None with algo {self.algo!r} (SEAC has one network per agent, "
-                                                "SePS chooses its groups)")
+            need(self.networks is None, "networks", f"None with algo {self.algo!r} (SEAC has one network per agent, "
+                                                    "SePS chooses its groups)")
             need(not self.bootstrap_truncation, "bootstrap_truncation",
                  f"None or False with algo {self.algo!r} (its n-step returns end at a truncation as at a termination, "
                  "the reference code's default)")
@@ -200,9 +221,9 @@ class TrainConfig:
         return self.n_step if ALGOS[self.algo].a2c else self.rollout_len
 
     @property
-    def shared_network(self) -> bool:
-        """One network for every seat: the algorithm's choice unless ``shared`` says otherwise."""
-        return ALGOS[self.algo].shared if self.shared is None else self.shared
+    def network_kind(self) -> str:
+        """Whose seats share a network (``NETWORKS``): ``networks``, else the algorithm's choice."""
+        return self.networks or ("one" if ALGOS[self.algo].shared else "agent")
 
     @property
     def iteration_steps(self) -> int:

@@ -14,8 +14,22 @@ import torch
 from torch import nn
 
 from oapo_lite import reuse
+from oapo_lite.config import NETWORKS
 
 UNAVAILABLE_LOGIT = -1e10  # as in HARL: masked actions keep a finite logit, so 0 * logit stays 0
+
+
+def owners(kind: str, agent_types) -> list[int]:
+    """The network of every seat (``TrainConfig.networks``): "agent" one each, "one" the same
+    for all, "type" one per kind of seat in ``agent_types``, numbered as the kinds first appear."""
+    if kind == "agent":
+        return list(range(len(agent_types)))
+    if kind == "one":
+        return [0] * len(agent_types)
+    if kind == "type":
+        kinds = list(dict.fromkeys(agent_types))
+        return [kinds.index(t) for t in agent_types]
+    raise ValueError(f"unknown network kind {kind!r}; choose from {list(NETWORKS)}")
 
 
 def _orthogonal(shape: tuple[int, int], gain: float, gen: torch.Generator) -> torch.Tensor:
@@ -51,9 +65,10 @@ class Categorical:
         return (d_old.exp() * (d_old - d_new)).sum(-1)
 
     @staticmethod
-    def kl_matrix(d: torch.Tensor, reduce: str) -> np.ndarray:
-        """Eq. 9's K from ``d[i, j]`` = learner i's log-probs on agent j's observations."""
-        return reuse.kl_matrix(d.detach().exp().double().numpy(), reduce)
+    def pairwise_kl(d: torch.Tensor) -> np.ndarray:
+        """Per observation, KL(pi_j || pi_i) (i, j, batch) from ``d[i, j]`` = learner i's
+        log-probs on agent j's observations: what Eq. 9's K reduces (``reuse.reduce_kl``)."""
+        return reuse.pairwise_kl(d.detach().exp().double().numpy())
 
 
 class Gaussian:
@@ -89,12 +104,11 @@ class Gaussian:
         return (s1 - s0 + (torch.exp(2 * s0) + (m0 - m1).pow(2)) / (2 * torch.exp(2 * s1)) - 0.5).sum(-1)
 
     @classmethod
-    def kl_matrix(cls, d: torch.Tensor, reduce: str) -> np.ndarray:
-        """Eq. 9's K, K[i, j] = reduce_batch KL(pi_j(.|o_j) || pi_i(.|o_j)), for Gaussians."""
+    def pairwise_kl(cls, d: torch.Tensor) -> np.ndarray:
+        """Per observation, KL(pi_j(.|o_j) || pi_i(.|o_j)) (i, j, batch), for Gaussians."""
         n, d = d.shape[0], d.detach()
         own = d[torch.arange(n), torch.arange(n)]  # (sources, batch, 2D)
-        kl = cls.kl(own.unsqueeze(0), d).clamp_min(0.0)
-        return (kl.amax(-1) if reduce == "max" else kl.mean(-1)).double().numpy()
+        return cls.kl(own.unsqueeze(0), d).clamp_min(0.0).double().numpy()
 
 
 class Actors(nn.Module):

@@ -5,6 +5,8 @@ MAPPO reuses everything uniformly, HAPPO only its own, OAPO gates by policy dist
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 
@@ -98,22 +100,52 @@ def categorical_kl(p: np.ndarray, q: np.ndarray, eps: float = 0.0) -> np.ndarray
         return np.where(p == 0, 0.0, p * (log_p - log_q)).sum(-1)  # a NaN stays NaN (a diverged net)
 
 
-def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
-    """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations.
+# Eq. 9's D_KL^max is a statistic of the per-observation KL over a source's batch. "max" is
+# the paper's; it is an extreme value that grows with the batch (issue 31). "mean" is the
+# expected KL, the paper's own relaxation of the max in Section 5.1; "q90" its 90th percentile.
+KL_REDUCES = ("max", "mean", "q90")
 
-    ``probs[i, j]`` is (batch, actions): learner i's action distribution on agent j's
-    observations, so ``probs[j, j]`` is the source's own policy there. Returns K with
-    K[i, j] = reduce_over_batch KL(pi_j(.|o_j) || pi_i(.|o_j)), reduce in {"max", "mean"}.
-    """
+
+def reduce_kl(kl: np.ndarray, reduce: str, active: np.ndarray | None = None) -> np.ndarray:
+    """Eq. 9's K from per-observation KLs: ``kl[i, j]`` (i, j, batch) are KL(pi_j || pi_i) on
+    source j's observations, reduced over the observations where j acted (``active[j]``, all
+    if None) by the statistic ``reduce`` in ``KL_REDUCES``; a source that never acted is at
+    distance 0 from every learner (nothing to disagree on)."""
+    if reduce not in KL_REDUCES:
+        raise ValueError(f"KL statistic must be one of {list(KL_REDUCES)}, got {reduce!r}")
+    if active is None:
+        if reduce == "q90":
+            return np.quantile(kl, 0.9, axis=-1)
+        return kl.max(-1) if reduce == "max" else kl.mean(-1)
+    on = np.broadcast_to(np.asarray(active, dtype=bool)[None], kl.shape)
+    if reduce == "max":  # KL >= 0, so the zeros of inactive samples never win
+        return np.where(on, kl, 0.0).max(-1)
+    if reduce == "mean":
+        return np.where(on, kl, 0.0).sum(-1) / np.maximum(on.sum(-1), 1)
+    with warnings.catch_warnings():  # an all-NaN row (a source that never acted) warns
+        warnings.simplefilter("ignore", RuntimeWarning)
+        q = np.nanquantile(np.where(on, kl, np.nan), 0.9, axis=-1)
+    return np.where(on.any(-1), q, 0.0)
+
+
+def pairwise_kl(probs: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """Per observation, KL(pi_j(.|o_j) || pi_i(.|o_j)) of categorical policies: ``probs[i, j]``
+    (batch, actions) is learner i's action distribution on agent j's observations, so
+    ``probs[j, j]`` is the source's own policy there. Returns (i, j, batch)."""
     probs = np.asarray(probs, dtype=float)
     if probs.ndim != 4 or probs.shape[0] != probs.shape[1]:
         raise ValueError(f"probs must have shape (n, n, batch, actions), got {probs.shape}")
-    if reduce not in ("max", "mean"):
-        raise ValueError(f"KL estimator must be 'max' or 'mean', got {reduce!r}")
     n = probs.shape[0]
     own = probs[np.arange(n), np.arange(n)]  # (n_sources, batch, actions)
-    kl = np.maximum(categorical_kl(own[None], probs, eps), 0.0)  # (i, j, batch)
-    return kl.max(-1) if reduce == "max" else kl.mean(-1)
+    return np.maximum(categorical_kl(own[None], probs, eps), 0.0)
+
+
+def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
+    """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations:
+    K[i, j] = reduce_over_batch KL(pi_j(.|o_j) || pi_i(.|o_j)) (``pairwise_kl``, ``reduce_kl``)."""
+    if reduce not in KL_REDUCES:
+        raise ValueError(f"KL statistic must be one of {list(KL_REDUCES)}, got {reduce!r}")
+    return reduce_kl(pairwise_kl(probs, eps), reduce)
 
 
 def sample_mapping(m: np.ndarray, rng: np.random.Generator) -> np.ndarray:

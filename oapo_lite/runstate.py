@@ -15,7 +15,7 @@ import torch
 
 from oapo_lite.a2c import Learner as A2CLearner
 from oapo_lite.config import ALGOS, TrainConfig
-from oapo_lite.nets import Actors
+from oapo_lite.nets import Actors, owners
 from oapo_lite.rollout import make_env
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
 from oapo_lite.update import Learner
@@ -66,7 +66,7 @@ class RunState:
         eval_env = make_env(cfg, cfg.eval_episodes, seed=derive_seed(cfg.seed, 2))
         torch.manual_seed(cfg.seed)
         init_gen = torch.Generator().manual_seed(cfg.seed)
-        actors = Actors(1 if cfg.shared_network else env.n_agents, env.obs_dim, env.n_actions, cfg.hidden,
+        actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,
                         env.continuous, init_gen)
         learner = (A2CLearner if ALGOS[cfg.algo].a2c else Learner)(cfg, env, actors, init_gen)
         act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))

@@ -16,15 +16,15 @@ from oapo_lite.adam import Adam
 from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
 from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
                               update_factor, value_loss, weighted_kl)
-from oapo_lite.nets import Actors, Critic, ValueNorm
+from oapo_lite.nets import Actors, Critic, ValueNorm, owners
 from oapo_lite.rollout import Inputs, Rollout, States, mean_or_nan
 from oapo_lite.trpo import trpo_step
 
 
 @dataclass
 class Sources:
-    """What one learner (net) trains on: the seats ``rows`` — its sources with W > 0 and the
-    seats it controls (``own``, positions in ``rows``, for the entropy and the factor)."""
+    """What one update of a net trains on: the seats ``rows`` — its sources with W > 0 and the
+    seats it learns for (``own``, positions in ``rows``, for the entropy and the factor)."""
 
     net: int
     rows: list[int]
@@ -39,17 +39,18 @@ class Sources:
     distinct: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @classmethod
-    def of(cls, net: int, W: np.ndarray, owner: list[int], batch: Rollout) -> "Sources":
-        own = [k for k in range(len(owner)) if owner[k] == net]
-        rows = sorted(set(np.flatnonzero(W[net] > 0).tolist()) | set(own))
-        w = W[net][rows]
+    def of(cls, net: int, weights: np.ndarray, own: list[int], batch: Rollout) -> "Sources":
+        """Net ``net`` learning for the seats ``own`` from every seat's samples, weighted by
+        ``weights`` (n,)."""
+        rows = sorted(set(np.flatnonzero(weights > 0).tolist()) | set(own))
+        w = weights[rows]
         # Eq. 7 weights the KL by M, which bounds the acting policy's own-seat KL by
         # delta / W[i, i]: nothing when W[i, i] = 0 ("sample" mode drew another source, or
         # reuse_lambda = 0), and then the policy that acts could move without limit. An own seat with
         # weight 0 therefore enters the trust region with weight 1 (its KL <= delta); where the
         # paper's weight is positive it is kept, so the weights mode is Eq. 7 as written.
         kl_w = np.where(np.isin(rows, own) & (w == 0), 1.0, w)
-        return cls(net, rows, [rows.index(k) for k in own], torch.as_tensor(w, dtype=torch.float32),
+        return cls(net, rows, [rows.index(int(k)) for k in own], torch.as_tensor(w, dtype=torch.float32),
                    batch.act[rows], batch.logp[rows], torch.as_tensor(kl_w, dtype=torch.float32),
                    None if batch.active is None else batch.active[rows],
                    torch.unique(batch.inputs.index[rows], return_inverse=True))
@@ -92,6 +93,8 @@ def ppo_loss(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor,
                               factor[idx], adv[idx], cfg.clip, active)
     own_active = None if active is None else active[src.own].reshape(-1)
     entropy = source_mean(actors.head.entropy(d[src.own]).reshape(-1), own_active)
+    if cfg.entropy_by_weight:  # weighted as the own seats' surrogate terms are
+        entropy = entropy * src.w[src.own].sum()
     return -(obj + cfg.entropy_coef * entropy), obj
 
 
@@ -158,22 +161,21 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     return normalise(adv.reshape(-1)), (adv + value[:-1]).reshape(-1), v_norm[:-1].reshape(-1)
 
 
-def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str,
-                     active: torch.Tensor | None = None) -> np.ndarray:
-    """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations (those where j acted, if
-    ``active`` (n, B) is given): every net on every input in one batched forward, then
-    gathered to (learner seat, source seat, sample)."""
+def pairwise_distances(actors: Actors, inputs: Inputs, owner: list[int]) -> np.ndarray:
+    """(learner seat i, source seat j, sample): KL(pi_j || pi_i) on each of seat j's
+    observations, what Eq. 9's K reduces; every net on every input in one batched forward."""
     k, (U, _) = actors.n_nets, inputs.obs.shape
     with torch.no_grad():
         d = actors(inputs.obs.expand(k, U, -1), range(k), inputs.avail.expand(k, U, -1))[owner][:, inputs.index]
-    if active is None:
-        return _finite_distances(actors.head.kl_matrix(d, reduce))
-    # where source j did not act, every learner is given j's own distribution: KL exactly 0
-    # there, which leaves a max unchanged; a mean is rescaled to the active samples below
-    seat, B = torch.arange(active.shape[0]), active.shape[1]
-    d = torch.where(active[None, :, :, None], d, d[seat, seat][None])
-    K = actors.head.kl_matrix(d, reduce)
-    return _finite_distances(K if reduce == "max" else K * (B / active.sum(1).clamp_min(1)).double().numpy())
+    return actors.head.pairwise_kl(d)
+
+
+def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str,
+                     active: torch.Tensor | None = None) -> np.ndarray:
+    """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations (those where j acted, if
+    ``active`` (n, B) is given), reduced by the statistic ``reduce`` (``reuse.KL_REDUCES``)."""
+    kl = pairwise_distances(actors, inputs, owner)
+    return _finite_distances(reuse.reduce_kl(kl, reduce, None if active is None else active.numpy()))
 
 
 def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarray, adv: torch.Tensor,
@@ -193,7 +195,7 @@ def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarr
     # sample b is step b // n_envs of env copy b % n_envs (``_per_agent``)
     fold_of = torch.arange(adv.shape[0]) % n_envs % folds
     for i in range(n):
-        src = Sources.of(i, M, list(range(n)), batch)
+        src = Sources.of(i, M[i], [i], batch)
         params = actors.net_params(i)
         logp = actors.head.log_prob(learner_dists(actors, inputs, src), src.act)
         for r, j in enumerate(src.rows):
@@ -217,27 +219,38 @@ def _finite_distances(K: np.ndarray) -> np.ndarray:
     return K
 
 
-def update_actors(actors: Actors, opts: list, batch: Rollout, W: np.ndarray, owner: list[int], order,
-                  adv: torch.Tensor, spec: AlgoSpec, cfg: TrainConfig, rng: np.random.Generator):
-    """Algorithm 1 lines 7-9: update the learners one after another in ``order``, learner i on
-    its sources with weights W[i]; for sequential algorithms the factor rho collects the own-seat
-    ratio of every learner already updated. Returns (final factor, surrogates, accepted KLs)."""
+def update_units(W: np.ndarray, owner: list[int], by: str) -> list[tuple[int, np.ndarray, list[int]]]:
+    """The updates of one iteration as (net, weights over the seats, the seats it learns for):
+    by "net", each network once on the mean of its seats' rows of ``W`` (n, n); by "seat", each
+    seat's network on that seat's row alone (a shared network then moves once per seat)."""
+    if by == "seat":
+        return [(net, W[k], [k]) for k, net in enumerate(owner)]
+    owner = np.asarray(owner)
+    return [(k, W[owner == k].mean(0), np.flatnonzero(owner == k).tolist()) for k in range(owner.max() + 1)]
+
+
+def update_actors(actors: Actors, opts: list, batch: Rollout, units: list, order, adv: torch.Tensor,
+                  spec: AlgoSpec, cfg: TrainConfig, rng: np.random.Generator):
+    """Algorithm 1 lines 7-9: the updates ``units`` (``update_units``) one after another in
+    ``order``, each on its sources with its weights (Eq. 8, or Eq. 7's step); for sequential
+    algorithms the factor rho collects the own-seat ratio of every update already made.
+    Returns (final factor, surrogates, accepted KLs)."""
     factor = torch.ones(adv.shape[0])
     objectives, trpo_kls = [], []
-    for net in order:
-        src = Sources.of(net, W, owner, batch)
+    for u in order:
+        src = Sources.of(*units[u], batch)
         if spec.trust_region:
             objective, accepted_kl = trpo_update(actors, batch.inputs, src, factor, adv, cfg)
             trpo_kls.append(accepted_kl)
         else:
-            objective = ppo_update(actors, opts[net], batch.inputs, src, factor, adv, cfg, rng)
+            objective = ppo_update(actors, opts[src.net], batch.inputs, src, factor, adv, cfg, rng)
         objectives.append(objective)
         if spec.sequential:
             with torch.no_grad():
                 d_new = learner_dists(actors, batch.inputs, src)[src.own]
                 factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
                                        None if src.active is None else src.active[src.own])
-            check_finite(factor, "the sequential factor rho", net)
+            check_finite(factor, "the sequential factor rho", src.net)
     return factor, objectives, trpo_kls
 
 
@@ -263,14 +276,17 @@ class Learner:
     theirs), so that a run is reproducible from its seed."""
 
     def __init__(self, cfg: TrainConfig, env, actors: Actors, gen: torch.Generator):
-        self.cfg, self.spec, self.actors, self.shared = cfg, ALGOS[cfg.algo], actors, cfg.shared_network
+        self.cfg, self.spec, self.actors = cfg, ALGOS[cfg.algo], actors
         n = env.n_agents
-        self.owner = [0] * n if self.shared else list(range(n))
+        self.owner = owners(cfg.network_kind, env.agent_types)
         self.allowed = reuse.allowed_mask(cfg.allowed, env.agents)
-        if self.spec.reuse == "uniform" or self.shared:
+        same_net = np.equal.outer(self.owner, self.owner)  # seats of one network need equal spaces too
+        if self.spec.reuse == "uniform":
             reuse.check_spaces(env, np.ones((n, n), bool))
         elif self.spec.reuse == "oapo":
-            reuse.check_spaces(env, np.ones((n, n), bool) if self.allowed is None else self.allowed)
+            reuse.check_spaces(env, same_net | (np.ones((n, n), bool) if self.allowed is None else self.allowed))
+        else:
+            reuse.check_spaces(env, same_net)
         # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
         self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm(enabled=cfg.value_norm)
@@ -298,10 +314,9 @@ class Learner:
             C = adaptive.agreement(G, cfg.reuse_adapt)
             M = adaptive.agreement_matrix(M, C, cfg.reuse_adapt)
         W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, self.rng)]
-        W = W.mean(0, keepdims=True) if self.shared else W  # a shared net learns for every seat
-        order = reuse.update_order(actors.n_nets, self.rng) if spec.sequential else range(actors.n_nets)
-        _, objectives, trpo_kls = update_actors(actors, self.actor_opts, batch, W, self.owner, order, adv, spec, cfg,
-                                                self.rng)
+        units = update_units(W, self.owner, cfg.update_by)
+        order = reuse.update_order(len(units), self.rng) if spec.sequential else range(len(units))
+        _, objectives, trpo_kls = update_actors(actors, self.actor_opts, batch, units, order, adv, spec, cfg, self.rng)
         critic_loss = update_critic(self.critic, self.critic_opt, self.value_norm, batch.states, v_old, returns, cfg,
                                     self.rng)
         accepted = [k for k in trpo_kls if not math.isnan(k)]

@@ -155,7 +155,7 @@ def test_bad_inputs_raise_naming_what_is_wrong(call, words):
 @pytest.mark.parametrize("bad, words", [
     (dict(reuse_adapt="variance"), ["reuse_adapt", "variance", "gradient"]),
     (dict(reuse_adapt="gradient", algo="happo"), ["reuse_adapt", "happo", "oappo", "oatrpo"]),
-    (dict(reuse_adapt="gradient", shared=True), ["reuse_adapt", "shared=True"]),
+    (dict(reuse_adapt="gradient", networks="one"), ["reuse_adapt", "networks='agent'"]),
     (dict(reuse_adapt="gradient_test", n_envs=2, steps=100), ["n_envs", ">= 4", "gradient_test"]),
 ])
 def test_bad_config_raises_naming_the_value_and_the_allowed(bad, words):
@@ -191,7 +191,7 @@ def test_source_gradients_add_up_to_the_gradient_of_the_weighted_objective(clip)
     # per fold of env copies (8 copies, 4 folds of 2): the whole batch's gradient is their mean
     folds = source_gradients(actors, batch.inputs, batch, m, adv, clip, folds=4)
     assert np.allclose(folds.mean(2), g, atol=1e-6) and not np.allclose(folds[:, :, 0], g)
-    src = Sources.of(0, m, [0, 1], batch)
+    src = Sources.of(0, m[0], [0], batch)
     params = actors.net_params(0)
     d = learner_dists(actors, batch.inputs, src)
     obj = off_agent_objective(actors.head.log_prob(d, src.act), src.logp_old, src.w, torch.ones_like(adv), adv, clip)

@@ -38,7 +38,7 @@ def _cli_error(capsys, *argv) -> str:
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--algo", "seac", "--shared", "true"], ["shared = True", "None with algo 'seac'"]),
+    (["--algo", "seac", "--networks", "one"], ["networks = 'one'", "None with algo 'seac'"]),
     (["--algo", "seac", "--bootstrap-truncation", "true"], ["bootstrap_truncation = True", "None or False"]),
     (["--algo", "seps", "--env", "black_blue_red", "--seps-clusters", "5", "--seps-pretrain-steps", "200"],
      ["seps_clusters = 5", "3 agents", "1..3"]),
@@ -287,7 +287,10 @@ def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
     (dict(sigma="0.1"), ["sigma = '0.1'", ">= 0"]),
     (dict(lr=float("nan")), ["lr = nan", "finite"]),
     (dict(seed=True), ["seed = True", "integer >= 0"]),
-    (dict(shared=0), ["shared = 0", "None, True or False"]),
+    (dict(networks=0), ["networks = 0", "None or one of ['agent', 'type', 'one']"]),
+    (dict(networks="team"), ["networks = 'team'", "None or one of ['agent', 'type', 'one']"]),
+    (dict(algo="mappo", update_by="seat"), ["update_by = 'seat'", "'net' with algo 'mappo'"]),
+    (dict(entropy_by_weight=1), ["entropy_by_weight = 1", "True or False"]),
     (dict(env=None), ["env = None", "map"]),
     (dict(env=""), ["env = ''", "map"]),
     (dict(env_fn=5), ["env_fn = 5", "callable"]),

@@ -14,7 +14,7 @@ from oapo_lite.losses import Diverged
 from oapo_lite.rollout import Inputs, Rollout
 from oapo_lite.runstate import load_checkpoint
 from oapo_lite.train import train
-from oapo_lite.update import policy_distances, update_actors
+from oapo_lite.update import policy_distances, update_actors, update_units
 
 torch.set_num_threads(1)
 
@@ -101,7 +101,8 @@ def test_a_learner_with_nan_weights_is_named_by_its_loss(algo, quantity):
     opts = [torch.optim.Adam(actors.net_params(k), lr=1e-3) for k in range(2)]
     adv = torch.randn(32, generator=torch.Generator().manual_seed(2))
     with pytest.raises(Diverged, match="^" + re.escape(f"{quantity} is not finite (learner 1)")):
-        update_actors(actors, [] if ALGOS[algo].trust_region else opts, batch, np.eye(2), [0, 1], [0, 1], adv,
+        update_actors(actors, [] if ALGOS[algo].trust_region else opts, batch, update_units(np.eye(2), [0, 1], "net"),
+                      [0, 1], adv,
                       ALGOS[algo], TrainConfig(algo=algo, ppo_epochs=1), np.random.default_rng(0))
     assert torch.isfinite(actors.weights[0][0]).all()  # learner 0 had stepped normally
 
@@ -114,7 +115,7 @@ def test_an_overflowing_factor_is_caught_at_the_learner_that_overflowed_it():
     batch.logp[0] = -1e4
     opts = [torch.optim.Adam(actors.net_params(k), lr=1e-3) for k in range(2)]
     with pytest.raises(Diverged, match=r"^the sequential factor rho is not finite \(learner 0\)"):
-        update_actors(actors, opts, batch, np.eye(2), [0, 1], [0, 1], torch.ones(32), ALGOS["oappo"],
+        update_actors(actors, opts, batch, update_units(np.eye(2), [0, 1], "net"), [0, 1], torch.ones(32), ALGOS["oappo"],
                       TrainConfig(ppo_epochs=1), np.random.default_rng(0))
 
 

@@ -87,13 +87,33 @@ def test_kl_matrix_against_direct_sum():
     probs = rng.dirichlet(np.ones(5), size=(3, 3, 8))
     k_max = reuse.kl_matrix(probs, "max")
     k_mean = reuse.kl_matrix(probs, "mean")
+    k_q90 = reuse.kl_matrix(probs, "q90")
     for i, j in itertools.product(range(3), repeat=2):
-        kls = [sum(p * np.log(p / q) for p, q in zip(probs[j, j, b], probs[i, j, b])) for b in range(8)]
-        assert np.isclose(k_max[i, j], max(kls))
+        kls = sorted(sum(p * np.log(p / q) for p, q in zip(probs[j, j, b], probs[i, j, b])) for b in range(8))
+        assert np.isclose(k_max[i, j], kls[-1])
         assert np.isclose(k_mean[i, j], np.mean(kls))
+        # the 90th percentile of 8 values by linear interpolation: position 0.9 * 7 = 6.3
+        assert np.isclose(k_q90[i, j], kls[6] + 0.3 * (kls[7] - kls[6]))
     assert np.allclose(np.diag(k_max), 0.0)
-    with pytest.raises(ValueError, match="'max' or 'mean'"):
+    with pytest.raises(ValueError, match="one of \\['max', 'mean', 'q90'\\], got 'median'"):
         reuse.kl_matrix(probs, "median")
+
+
+def test_reduce_kl_reads_only_the_samples_where_the_source_acted():
+    """Inactive samples are left out of every statistic, whatever their KL; a source that
+    never acted is at distance 0."""
+    rng = np.random.default_rng(3)
+    kl = rng.exponential(size=(2, 3, 10))
+    active = rng.random((3, 10)) < 0.6
+    active[2] = False
+    for reduce in reuse.KL_REDUCES:
+        K = reuse.reduce_kl(kl, reduce, active)
+        noisy = np.where(active[None], kl, 1e6)  # huge KLs where nobody acted change nothing
+        assert np.array_equal(K, reuse.reduce_kl(noisy, reduce, active))
+        for j in range(2):
+            alone = reuse.reduce_kl(kl[:, j:j + 1, active[j]], reduce)[:, 0]
+            assert np.allclose(K[:, j], alone, rtol=1e-12)
+        assert (K[:, 2] == 0).all()
 
 
 def test_categorical_kl_is_exact_without_eps_and_finite_with_it():

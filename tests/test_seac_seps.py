@@ -277,7 +277,7 @@ def test_bad_seac_seps_values_raise_naming_the_value(bad, words):
 @pytest.mark.parametrize("bad, words", [
     (dict(algo="seps", seps_clusters=5), ["seps_clusters = 5", "4 agents", "1..4"]),
     (dict(algo="seac", bootstrap_truncation=True), ["bootstrap_truncation = True", "None or False"]),
-    (dict(algo="seac", shared=True), ["shared = True", "allowed: None"]),
+    (dict(algo="seac", networks="one"), ["networks = 'one'", "allowed: None"]),
 ])
 def test_settings_seac_and_seps_cannot_use_raise_at_the_start(tmp_path, bad, words):
     with pytest.raises(ValueError) as err:

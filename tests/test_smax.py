@@ -138,3 +138,30 @@ def test_oappo_warmed_up_for_the_whole_run_is_bitwise_happo_on_smax(env, tmp_pat
     a, b, c = (load_checkpoint(tmp_path / name)["actors"] for name in ("happo", "oappo", "reuse"))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     assert not all(torch.equal(a[k], c[k]) for k in a)  # without the warm-up, reuse changes the update
+
+
+def test_the_readings_of_the_networks_on_smax(env, tmp_path):
+    """Issue 31's readings on an engine with action masks and agents that die: 3m's three
+    marines are one kind, so one net per kind is one shared net and OAPPO is MAPPO bit for bit;
+    a shared net updated seat by seat with M = I (lambda = 1) is the shared-actor HAPPO bit for
+    bit; one net per seat updated seat by seat is HAPPO bit for bit."""
+    cfg = dict(env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10, eval_every=3, eval_episodes=N,
+               max_steps=MAX_STEPS, hidden=(16,))
+    runs = {"mappo": dict(algo="mappo"), "type": dict(algo="oappo", networks="type"),
+            "happo": dict(algo="happo"), "happo_seat": dict(algo="happo", update_by="seat"),
+            "shared_happo": dict(algo="happo", networks="one", update_by="seat"),
+            "shared_oappo": dict(algo="oappo", networks="one", update_by="seat", reuse_lambda=1.0)}
+    for name, kw in runs.items():
+        train(TrainConfig(**kw, **cfg), tmp_path / name, progress=False)
+    params = {name: load_checkpoint(tmp_path / name)["actors"] for name in runs}
+
+    def same(a, b):
+        return params[a].keys() == params[b].keys() and all(torch.equal(params[a][k], params[b][k]) for k in params[a])
+
+    assert same("mappo", "type") and same("happo", "happo_seat") and same("shared_happo", "shared_oappo")
+    assert not same("mappo", "shared_happo") and not same("happo", "mappo")
+
+
+def test_smax_declares_each_seat_s_unit_type():
+    assert SmaxVec("3m", 1).agent_types == ("marine",) * 3
+    assert SmaxVec("2s3z", 1).agent_types == ("stalker",) * 2 + ("zealot",) * 3

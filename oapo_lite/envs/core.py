@@ -46,7 +46,7 @@ class VecMaze:
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         self.maze = maze
         self.n_envs, self.max_steps = int(n_envs), int(max_steps)
-        self.agents = self.maze.agents
+        self.agents = self.agent_types = self.maze.agents  # a maze names its seats by their type
         self.n_agents = self.maze.n_agents
         self.n_actions = N_ACTIONS
         self.continuous = False

@@ -175,6 +175,7 @@ class GRFVec:
         self.name, self.n_envs, self.seed, self.max_steps = name, int(n_envs), int(seed), int(max_steps)
         self.n_agents = SCENARIOS[name]
         self.agents = tuple(f"player_{k}" for k in range(self.n_agents))
+        self.agent_types = self.agents  # HARL's players keep their own roles
         self.n_actions, self.obs_dim, self.state_dim = N_ACTIONS, OBS_DIM, self.n_agents * OBS_DIM
         self.continuous = False
         self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle

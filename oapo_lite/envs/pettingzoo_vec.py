@@ -54,6 +54,11 @@ class PettingZooVec:
         self.n_envs, self.seed, self.max_steps = int(n_envs), int(seed), max_steps
         first = self.envs[0]
         self.agents = tuple(first.possible_agents)
+        # every seat its own kind unless the env says otherwise (``agent_types``: one name per seat)
+        self.agent_types = tuple(getattr(first, "agent_types", self.agents))
+        if len(self.agent_types) != len(self.agents):
+            raise ValueError(f"the env's agent_types {list(self.agent_types)} must name one type per agent "
+                             f"of {list(self.agents)}")
         self.n_agents = len(self.agents)
         self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle
         self.spaces = tuple((first.observation_space(a), first.action_space(a)) for a in self.agents)

@@ -162,6 +162,8 @@ class SmaxVec:
         env = self._c.env
         self.name = name
         self.agents = tuple(env.agents)
+        names = env._env.unit_type_names  # the heuristic enemy wraps the SMAX env that names the types
+        self.agent_types = tuple(names[int(t)] for t in _scenario(name).unit_types[:env.num_allies])
         self.n_agents = env.num_allies
         self.n_actions = env.num_ally_actions
         self.obs_dim = env.obs_size

@@ -1,7 +1,8 @@
 """What every engine gives the training loop: a vector of ``n_envs`` copies of one game, with
 auto-reset, and the record ``VecStep`` that its ``reset`` and ``step`` return.
 
-A vector env has ``n_envs``, ``agents`` (seat names), ``n_agents``, ``n_actions`` (per seat;
+A vector env has ``n_envs``, ``agents`` (seat names), ``agent_types`` (the kind of each seat:
+seats of one kind may share a network, ``TrainConfig.networks``), ``n_agents``, ``n_actions`` (per seat;
 the size of a Box action), ``obs_dim``, ``state_dim`` (the centralised critic's input),
 ``continuous`` (Box actions: a Gaussian policy), ``time_in_state`` (its state carries the time
 left, so hitting the time limit is part of the game: no bootstrap there) and ``optimum`` (the
