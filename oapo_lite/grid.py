@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from oapo_lite.config import ALGOS, TrainConfig
-from oapo_lite.reuse import SCHEMES
+from oapo_lite.reuse import KL_REDUCES, SCHEMES
 from oapo_lite.verdicts import FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, stabler, stuck
 
 
@@ -141,6 +141,24 @@ HALFCHEETAH = "mamujoco:HalfCheetah-2x3"
 # the cpu batch on HalfCheetah: 8 copies x 250 steps, MuJoCo's 1,000-step episodes
 MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)
 MAMUJOCO_SMOKE = dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100))
+# Issue 31's closing table: OAPPO under each reading of the paper's networks and each statistic
+# of Eq. 9's gate, beside HAPPO and MAPPO, at the cpu configs of Fig. 4 (seeds 0-2) and of the
+# early-reuse figure. A reading or statistic that cannot change the run on a map is left out
+# there: one net per kind is one net per agent where every seat is its own kind (HalfCheetah)
+# and MAPPO where all are one kind (6h_vs_8z, as the tests pin on 3m); a network shared by every
+# seat is at KL 0 from itself, so its gate never shuts and no statistic matters.
+READING_ENVS = ("smax:2s3z", "smax:6h_vs_8z", HALFCHEETAH)
+
+
+def _reading_curves(env: str) -> tuple:
+    kinds = ("agent", "type") if env == "smax:2s3z" else ("agent",)
+    return (("happo", dict(algo="happo", env=env)), ("mappo", dict(algo="mappo", env=env)),
+            *((f"oappo {kind} {stat}", dict(algo="oappo", env=env, kl_reduce=stat,
+                                            **({} if kind == "agent" else dict(networks=kind))))
+              for kind in kinds for stat in KL_REDUCES),
+            ("oappo one seat", dict(algo="oappo", env=env, networks="one", update_by="seat")))
+
+
 # Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
 FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
@@ -219,6 +237,11 @@ GRID = (
     Figure("fig_adaptive", tuple((label, dict(env=m, **kw)) for m in MAZES for label, kw in ADAPTIVE_CURVES)
            + tuple((f"{label} lambda=0.4", dict(env="black_red", reuse_lambda=0.4, **kw)) for label, kw in ADAPTIVE_CURVES[:2]),
            notebook="17_adaptive_reuse"),
+    # Issue 31: the entropy bonus weighted as the own-seat surrogate is (W[i, i]) against HARL's
+    # unweighted bonus, on Black-Red (the engines' tuned SMAX settings have no entropy bonus)
+    Figure("fig_entropy_weight", (("oappo", dict(algo="oappo")),
+                                  ("oappo entropy x W[i,i]", dict(algo="oappo", entropy_by_weight=True))),
+           common=dict(env="black_red"), notebook="17_adaptive_reuse"),
     # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits about 3 hours on 2
     # cores: the small maps at 5 seeds, the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) and
     # 3s5z_vs_3s6z (1M, 5%; JaxMARL's MAPPO first wins there at about 500k) at 3 seeds
@@ -265,6 +288,15 @@ GRID = (
            common=dict(env=HALFCHEETAH), runs_at=("smoke", "cpu"), budgets={
                "smoke": MAMUJOCO_SMOKE,
                "cpu": dict(seeds=tuple(range(10)), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # ``cpu``: each env at the config of its committed runs (Fig. 4's, the early-reuse figure's),
+    # so HAPPO, MAPPO and OAPPO (per agent, max) there are those runs, read from the cache
+    Figure("fig_readings_smax", tuple(c for env in READING_ENVS[:2] for c in _reading_curves(env)),
+           common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
+           metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
+    Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
     # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run, so 18
