@@ -130,6 +130,20 @@ def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
         all_iterations=("all_iterations", "mean"))
 
 
+def reuse_table(df: pd.DataFrame, y: str, tail: float = 0.2) -> pd.DataFrame:
+    """Per env and label (issue 31's table): seeds; the share of every iteration in which some
+    learner reused (``all_iterations``, means over the runs that recorded it); the mean peer
+    share at the evaluated iterations; and the final ``y``, a run's mean over the last ``tail``
+    of its evaluation points, as mean and standard deviation over seeds."""
+    parts = []
+    for env, part in df.groupby("env", sort=False):
+        final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
+        parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
+                     .join(final.mean().rename("final")).join(final.std().rename("final_std"))
+                     .assign(env=env).set_index("env", append=True).swaplevel())
+    return pd.concat(parts)
+
+
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
     gain = (runs["final"] - runs["initial"]).groupby(runs["label"], sort=False)
@@ -201,6 +215,17 @@ def bootstrap_interval(statistic, *samples, confidence: float = CONFIDENCE,
     ci = stats.bootstrap(samples, statistic, n_resamples=n_resamples, confidence_level=confidence,
                          method="percentile", vectorized=True, rng=np.random.default_rng(seed)).confidence_interval
     return Interval(point, float(ci.low), float(ci.high))
+
+
+def paired_difference(df: pd.DataFrame, a, b, y: str, tail: float = 0.2) -> tuple[pd.DataFrame, Interval]:
+    """Curve ``a`` against curve ``b`` seed by seed: per seed both runs' final value (the mean of
+    ``y`` over the last ``tail`` of their evaluation points) and a - b, with the mean difference
+    and its bootstrap interval over the seeds that have both runs. The pairs are resampled
+    whole, since one seed gives both runs the same initial networks and environments."""
+    runs = per_run(df[df["label"].isin([a, b])], tail=tail, y=y).pivot(index="seed", columns="label", values="final")
+    runs = runs.reindex(columns=[a, b]).dropna()
+    runs["difference"] = runs[a] - runs[b]
+    return runs, bootstrap_interval(np.mean, runs["difference"].to_numpy())
 
 
 class Evidence:

@@ -328,3 +328,38 @@ def test_the_printed_rule_names_every_status_and_the_veto():
     for word in ("Not testable", "did not learn", "reproduced", "contradicted", "direction only",
                  "not reproduced", "fewer seeds"):
         assert word in v.RULE
+
+
+def test_paired_difference_compares_each_seed_with_its_own_pair():
+    """Per seed: the mean of the last fifth of each run, and a - b; a seed with one run only is
+    left out. The pairs differ by exactly 1 while the seeds spread over hundreds, so an
+    interval over pairs is the point 1, which an unpaired comparison could not show."""
+    steps = np.arange(10) * 100
+    rows = []
+    for seed, level in enumerate([0.0, 300.0, -200.0, 900.0]):
+        for label, shift in (("a", 1.0), ("b", 0.0)):
+            if seed == 3 and label == "a":
+                continue
+            y = np.r_[np.zeros(8), level + shift, level + shift + 2]  # last fifth: level + shift + 1
+            rows += [{"label": label, "seed": seed, "step": s, "ret": v} for s, v in zip(steps, y)]
+    runs, diff = v.paired_difference(pd.DataFrame(rows), "a", "b", y="ret")
+    assert runs.index.tolist() == [0, 1, 2]
+    assert runs["b"].tolist() == [1.0, 301.0, -199.0] and runs["difference"].tolist() == [1.0, 1.0, 1.0]
+    assert (diff.point, diff.low, diff.high) == (1.0, 1.0, 1.0)
+
+
+def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
+    """Two envs, two labels: the reuse columns come from M and ``iterations_reusing``, the final
+    value from the last fifth of the evaluation points."""
+    shared, own = [[0.5, 0.5], [0.5, 0.5]], [[1.0, 0.0], [0.0, 1.0]]
+    rows = []
+    for env in ("e1", "e2"):
+        for label, m, every in (("mappo", shared, 1.0), ("happo", own, 0.0)):
+            for seed in (0, 1):
+                rows += [{"env": env, "label": label, "seed": seed, "step": s, "reuse_matrix": m,
+                          "iterations_reusing": every, "ret": float(s >= 8) * (seed + 1)} for s in range(10)]
+    t = v.reuse_table(pd.DataFrame(rows), "ret")
+    assert t.index.tolist() == [("e1", "mappo"), ("e1", "happo"), ("e2", "mappo"), ("e2", "happo")]
+    assert t["seeds"].tolist() == [2] * 4 and t["all_iterations"].tolist() == [1.0, 0.0, 1.0, 0.0]
+    assert t["mean_peer_share"].tolist() == [0.5, 0.0, 0.5, 0.0]
+    assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth: 1 and 2
