@@ -1,159 +1,35 @@
-"""Which statistic of the per-observation KL should Eq. 9's gate compare with sigma? (issue 31)
+"""The gate-statistic study of issue 31 (``oapo_lite/gate_study.py`` says what it measures and
+the rule that chooses): trains what is missing, then prints the table and the choice.
 
-Trains HAPPO (no reuse, so its policies drift apart as they would without the gate's pull) on
-SMAX 3m, 2s3z, 6h_vs_8z and HalfCheetah 2x3 at the configs of Fig. 4's and the early-reuse
-figure's ``cpu`` budgets, and at every iteration reduces the same per-observation KLs
-(``update.pairwise_distances``) by each statistic of ``reuse.KL_REDUCES``. One CSV per run
-goes to ``figures/data/gate_statistic/``, its config and git revision in a JSON beside it; a run
-already there is not trained again. Then it prints, per env, statistic and sigma:
-
-- ``open``: the share of iterations in which some learner has a peer within sigma (the share of
-  iterations an OAPPO run would reuse in, had its nets followed HAPPO's path);
-- ``last open``: the last env step at which that happened;
-- ``pairs``: the share of (iteration, learner, peer) within sigma;
-- ``auc`` (maps with two kinds of seat): the probability that a same-kind pair is nearer than a
-  cross-kind pair of the same iteration, over every iteration (0.5: the distance does not tell
-  role partners apart).
-
-The rule that chooses the engine statistic was fixed before any run, and reads K alone, never a
-win rate or return: at the paper's sigma = 0.1, a statistic must (1) let the gate operate,
-``open`` >= 0.25 on every env, and (2) still gate, ``pairs`` <= 0.9 on every env; among those,
-the largest ``auc`` on 2s3z wins. If none passes both, the one passing (2) with the largest
-smallest ``open`` wins. The script prints the choice.
-
-    .venv/bin/python benchmarks/gate_statistic.py --seeds 0 1 2           # train what is missing, then summarise
+    .venv/bin/python benchmarks/gate_statistic.py --seeds 0 1 2            # every env
     .venv/bin/python benchmarks/gate_statistic.py --envs smax:3m --seeds 0  # a part of it
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import sys
-import tempfile
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from oapo_lite import experiments, grid, reuse  # noqa: E402
-from oapo_lite.config import TrainConfig  # noqa: E402
-from oapo_lite.rollout import make_env  # noqa: E402
-from oapo_lite.runstate import git_revision  # noqa: E402
-from oapo_lite.store import atomic_write, write_frame  # noqa: E402
-from oapo_lite.train import train  # noqa: E402
-from oapo_lite.update import Learner, pairwise_distances  # noqa: E402
-
-OUT = ROOT / "figures" / "data" / "gate_statistic"
-ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", grid.HALFCHEETAH)
-SIGMA = TrainConfig.sigma  # the paper's, where the rule is read
-MIN_OPEN, MAX_PAIRS = 0.25, 0.9
-
-
-def happo_config(env: str, seed: int) -> TrainConfig:
-    """HAPPO's config on ``env`` at the ``cpu`` budget of the figure that runs it."""
-    figure = "fig_early_reuse" if env == grid.HALFCHEETAH else "fig4_smax"
-    for run in grid.runs_of(figure, "cpu"):
-        if run.cfg.algo == "happo" and run.cfg.env == env:
-            return dataclasses.replace(run.cfg, seed=seed)
-    raise ValueError(f"no HAPPO run of {figure} on {env}")
-
-
-def measure(cfg: TrainConfig) -> pd.DataFrame:
-    """Train ``cfg`` and return K under every statistic at every iteration, one row per
-    (iteration, learner, peer)."""
-    rows, learn, types = [], Learner.learn, make_env(cfg, 1, seed=0).agent_types
-
-    def recording(self, batch, step, it):
-        kl = pairwise_distances(self.actors, batch.inputs, self.owner)
-        active = None if batch.active is None else batch.active.numpy()
-        K = {s: reuse.reduce_kl(kl, s, active) for s in reuse.KL_REDUCES}
-        for i, j in zip(*np.nonzero(~np.eye(len(kl), dtype=bool))):
-            rows.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, "learner": i, "peer": j,
-                         "same_kind": types[i] == types[j], **{s: K[s][i, j] for s in K}})
-        return learn(self, batch, step, it)
-
-    Learner.learn = recording
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            train(cfg, tmp, resume=False, progress=False)
-    finally:
-        Learner.learn = learn
-    return pd.DataFrame(rows).assign(env=cfg.env, seed=cfg.seed)
-
-
-def summary(df: pd.DataFrame, sigmas=grid.SIGMAS) -> pd.DataFrame:
-    """Per env, statistic and sigma: open, last open, pairs, auc (see the module docstring),
-    each a mean over the seeds on disk."""
-    out = []
-    for (env, seed), run in df.groupby(["env", "seed"]):
-        n_it = run["iteration"].nunique()
-        for stat in reuse.KL_REDUCES:
-            nearest = run.groupby(["iteration", "learner"])[stat].min().groupby("iteration").min()
-            auc = _auc(run, stat) if run["same_kind"].any() and (~run["same_kind"]).any() else np.nan
-            for sigma in sigmas:
-                open_its = nearest.index[nearest <= sigma]
-                out.append({"env": env, "seed": seed, "statistic": stat, "sigma": sigma,
-                            "open": len(open_its) / n_it, "pairs": float((run[stat] <= sigma).mean()),
-                            "last open": int(open_its.max()) * int(run["step"].iloc[0]) if len(open_its) else 0,
-                            "auc": auc})
-    return pd.DataFrame(out).groupby(["env", "statistic", "sigma"]).mean(numeric_only=True).drop(columns="seed")
-
-
-def _auc(run: pd.DataFrame, stat: str) -> float:
-    """P(a same-kind pair's K < a cross-kind pair's K of the same iteration), ties counted half."""
-    wins = total = 0.0
-    for _, it in run.groupby("iteration"):
-        same, cross = it.loc[it["same_kind"], stat].to_numpy(), it.loc[~it["same_kind"], stat].to_numpy()
-        diff = same[:, None] - cross[None, :]
-        wins += (diff < 0).sum() + 0.5 * (diff == 0).sum()
-        total += diff.size
-    return wins / total
-
-
-def choose(table: pd.DataFrame) -> tuple[str, str]:
-    """The rule of the module docstring, at sigma = ``SIGMA``: (statistic, why)."""
-    at = table.xs(SIGMA, level="sigma")
-    smallest_open = at["open"].groupby("statistic").min()
-    largest_pairs = at["pairs"].groupby("statistic").max()
-    auc = at["auc"].xs("smax:2s3z", level="env") if "smax:2s3z" in at.index.get_level_values("env") else None
-    gates = largest_pairs[largest_pairs <= MAX_PAIRS].index
-    both = [s for s in gates if smallest_open[s] >= MIN_OPEN]
-    if both:
-        best = max(both, key=lambda s: -np.inf if auc is None else auc[s])
-        return best, (f"passes both conditions ({', '.join(both)} do); the largest 2s3z auc "
-                      f"{'n/a' if auc is None else f'{auc[best]:.2f}'}")
-    if len(gates):
-        best = max(gates, key=lambda s: smallest_open[s])
-        return best, f"none keeps the gate open in {MIN_OPEN:.0%} of iterations everywhere; the largest smallest open share"
-    return "max", "no statistic still gates (pairs <= 0.9 everywhere fails for all): the paper's max is kept"
+from oapo_lite import gate_study  # noqa: E402
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--envs", nargs="+", default=list(ENVS))
+    parser.add_argument("--envs", nargs="+", default=list(gate_study.ENVS))
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     args = parser.parse_args(argv)
-    OUT.mkdir(parents=True, exist_ok=True)
-    for env in args.envs:
-        for seed in args.seeds:
-            cfg = happo_config(env, seed)
-            path = OUT / f"{experiments.run_id(cfg)}.csv"
-            if not path.exists():
-                print(f"training {env} seed {seed} ...", flush=True)
-                record = json.dumps({"config": cfg.flat(), "git_rev": git_revision()}, default=str, indent=1)
-                atomic_write(lambda tmp: Path(tmp).write_text(record), path.with_suffix(".json"))
-                write_frame(measure(cfg), path)
-    df = pd.concat([pd.read_csv(p) for p in sorted(OUT.glob("*.csv"))], ignore_index=True)
-    table = summary(df)
+    gate_study.run(args.envs, args.seeds)
+    df = gate_study.load()
+    table = gate_study.summary(df)
     pd.set_option("display.width", 160)
     print(f"seeds on disk per env: {df.groupby('env')['seed'].nunique().to_dict()}")
     print(table.round(3).to_string())
-    stat, why = choose(table)
-    print(f"chosen at sigma = {SIGMA:g}: {stat!r}: {why}")
+    stat, why = gate_study.choose(table)
+    print(f"chosen at sigma = {gate_study.SIGMA:g}: {stat!r}: {why}")
     return 0
 
 

@@ -13,7 +13,7 @@ YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arri
 # colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
 ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
                "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
-               "oappo adaptive": "#145214"}
+               "oappo adaptive": "#145214", "oappo warm-up 10": "#98df8a"}
 AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
 
