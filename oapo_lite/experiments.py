@@ -216,6 +216,20 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
                            "(reported above)")
 
 
+def seat_networks(figure: str, budget: str) -> dict[tuple[str, object], list[int]]:
+    """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``);
+    each env is built once, with one copy, to read its seats' kinds."""
+    from oapo_lite.nets import owners
+    from oapo_lite.rollout import make_env
+
+    kinds, out = {}, {}
+    for label, cfg in figure_runs(figure, budget):
+        if cfg.env not in kinds:
+            kinds[cfg.env] = make_env(cfg, 1, seed=0).agent_types
+        out[cfg.env, label] = owners(cfg.network_kind, kinds[cfg.env])
+    return out
+
+
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
     with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""

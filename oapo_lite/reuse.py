@@ -27,12 +27,15 @@ def happo_matrix(n: int) -> np.ndarray:
     return np.eye(_check_n(n))
 
 
-def peer_share(m) -> float:
+def peer_share(m, owner=None) -> float:
     """How much of the learners' updates comes from other agents' experience: the off-diagonal
     mass of M's rows, averaged over learners (0 for HAPPO, (n - 1) / n for MAPPO, 1 - lambda
-    for Eq. 9 with every peer within sigma)."""
+    for Eq. 9 with every peer within sigma). With ``owner`` (the network of each seat), only
+    the mass on seats of other networks: the reuse Eq. 9's gate decided, since seats that share
+    a network are at KL 0 from each other."""
     m = np.asarray(m, dtype=float)
-    return float(m[~np.eye(len(m), dtype=bool)].sum() / len(m))
+    other = ~np.eye(len(m), dtype=bool) if owner is None else ~np.equal.outer(owner, owner)
+    return float(m[other].sum() / len(m))
 
 
 def nearest_peer(kl) -> np.ndarray:

@@ -130,15 +130,21 @@ def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
         all_iterations=("all_iterations", "mean"))
 
 
-def reuse_table(df: pd.DataFrame, y: str, tail: float = 0.2) -> pd.DataFrame:
+def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd.DataFrame:
     """Per env and label (issue 31's table): seeds; the share of every iteration in which some
-    learner reused (``all_iterations``, means over the runs that recorded it); the mean peer
-    share at the evaluated iterations; and the final ``y``, a run's mean over the last ``tail``
-    of its evaluation points, as mean and standard deviation over seeds."""
+    learner reused (``all_iterations``, means over the runs that recorded it); at the evaluated
+    iterations, the mean peer share and the mean share across networks (``peer_share`` with
+    ``owners[(env, label)]``, the network of each seat: reuse through Eq. 9's gate); and the
+    final ``y``, a run's mean over the last ``tail`` of its evaluation points, as mean and
+    standard deviation over seeds."""
     parts = []
     for env, part in df.groupby("env", sort=False):
         final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
+        rated = part[part["reuse_matrix"].notna()]
+        across = rated.groupby("label", sort=False).apply(
+            lambda runs: runs["reuse_matrix"].map(lambda m: peer_share(m, owners[env, runs.name])).mean())
         parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
+                     .join(across.rename("mean_across_nets"))
                      .join(final.mean().rename("final")).join(final.std().rename("final_std"))
                      .assign(env=env).set_index("env", append=True).swaplevel())
     return pd.concat(parts)

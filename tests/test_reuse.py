@@ -177,6 +177,15 @@ def test_peer_share_of_the_three_rules(n):
     assert np.isclose(reuse.peer_share(reuse.mappo_matrix(n)), (n - 1) / n)
     close = reuse.oapo_matrix(np.zeros((n, n)), sigma=0.1, reuse_lambda=0.7)  # every peer within sigma
     assert np.isclose(reuse.peer_share(close), 0.0 if n == 1 else 0.3)
+    # across networks only: with one network for all seats none, with one per seat all of it
+    assert reuse.peer_share(close, [0] * n) == 0.0
+    assert reuse.peer_share(close, list(range(n))) == reuse.peer_share(close)
+
+
+def test_peer_share_across_networks_counts_only_the_other_networks_seats():
+    m = np.array([[0.6, 0.3, 0.1], [0.2, 0.8, 0.0], [0.25, 0.25, 0.5]])
+    # seats 0 and 1 share a network: row 0 counts 0.1, row 1 0.0, row 2 0.5
+    assert np.isclose(reuse.peer_share(m, [0, 0, 1]), (0.1 + 0.0 + 0.5) / 3)
 
 
 def test_nearest_peer_is_the_smallest_distance_to_another_agent():

@@ -358,8 +358,10 @@ def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
             for seed in (0, 1):
                 rows += [{"env": env, "label": label, "seed": seed, "step": s, "reuse_matrix": m,
                           "iterations_reusing": every, "ret": float(s >= 8) * (seed + 1)} for s in range(10)]
-    t = v.reuse_table(pd.DataFrame(rows), "ret")
+    owners = {("e1", "mappo"): [0, 0], ("e2", "mappo"): [0, 1]} | {(e, "happo"): [0, 1] for e in ("e1", "e2")}
+    t = v.reuse_table(pd.DataFrame(rows), "ret", owners)
     assert t.index.tolist() == [("e1", "mappo"), ("e1", "happo"), ("e2", "mappo"), ("e2", "happo")]
     assert t["seeds"].tolist() == [2] * 4 and t["all_iterations"].tolist() == [1.0, 0.0, 1.0, 0.0]
     assert t["mean_peer_share"].tolist() == [0.5, 0.0, 0.5, 0.0]
+    assert t["mean_across_nets"].tolist() == [0.0, 0.0, 0.5, 0.0]  # one net on e1: no reuse across nets
     assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth: 1 and 2
