@@ -165,3 +165,20 @@ def test_the_readings_of_the_networks_on_smax(env, tmp_path):
 def test_smax_declares_each_seat_s_unit_type():
     assert SmaxVec("3m", 1).agent_types == ("marine",) * 3
     assert SmaxVec("2s3z", 1).agent_types == ("stalker",) * 2 + ("zealot",) * 3
+
+
+def test_importing_jaxmarl_through_the_engine_keeps_the_notebook_s_output_streams():
+    """jaxmarl's import replaces sys.stdout (in a notebook kernel every later print then goes to
+    the kernel's terminal); the engine imports it with the streams kept. Fresh interpreters, since
+    a module is imported once per process."""
+    import subprocess
+    import sys
+
+    probe = ("import io, sys\nstream = io.TextIOWrapper(io.BytesIO())\nsys.stdout = stream\n{}\n"
+             "sys.__stdout__.write(str(sys.stdout is stream))")
+    bare = subprocess.run([sys.executable, "-c", probe.format("import jaxmarl.environments.smax")],
+                          capture_output=True, text=True, check=True)
+    kept = subprocess.run([sys.executable, "-c", probe.format("from oapo_lite.envs.smax import _jaxmarl_smax\n"
+                                                              "_jaxmarl_smax()")],
+                          capture_output=True, text=True, check=True)
+    assert bare.stdout.endswith("False") and kept.stdout.endswith("True")

@@ -49,14 +49,26 @@ def check(name: str) -> None:
                          f"(this project's stand-ins, see ASSUMPTIONS.md: {list(STANDINS)})")
 
 
+def _jaxmarl_smax():
+    """``jaxmarl.environments.smax``, imported with ``sys.stdout`` and ``sys.stderr`` kept:
+    importing jaxmarl replaces ``sys.stdout`` by a plain stream, which in a notebook kernel
+    sends every later print to the kernel's terminal instead of the notebook."""
+    out, err = sys.stdout, sys.stderr
+    try:
+        import jaxmarl.environments.smax as smax
+    finally:
+        sys.stdout, sys.stderr = out, err
+    return smax
+
+
 def _scenario(name: str):
     import jax.numpy as jnp
-    from jaxmarl.environments.smax import Scenario, map_name_to_scenario
 
+    smax = _jaxmarl_smax()
     if name in STANDINS:
         allies, enemies = STANDINS[name]
-        return Scenario(jnp.array(allies + enemies, dtype=jnp.uint8), len(allies), len(enemies), False, False)
-    return map_name_to_scenario(name)
+        return smax.Scenario(jnp.array(allies + enemies, dtype=jnp.uint8), len(allies), len(enemies), False, False)
+    return smax.map_name_to_scenario(name)
 
 
 def _persistent_cache() -> None:
@@ -73,7 +85,7 @@ class _Compiled:
     def __init__(self, name: str, max_steps: int):
         import jax
         import jax.numpy as jnp
-        from jaxmarl.environments.smax import HeuristicEnemySMAX
+        HeuristicEnemySMAX = _jaxmarl_smax().HeuristicEnemySMAX
 
         _persistent_cache()
         env = HeuristicEnemySMAX(scenario=_scenario(name), max_steps=max_steps)
