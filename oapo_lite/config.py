@@ -97,8 +97,9 @@ class TrainConfig:
     # sequential factor, so a network shared by several seats moves once per seat (HARL's HAPPO
     # with a shared actor); where every network has one seat the two are the same
     update_by: str = "net"
-    # the entropy bonus weighted as the own-seat surrogate is (W[i, i] of Eq. 8's weights), so
-    # that reuse does not raise the bonus relative to the learner's own experience
+    # the entropy bonus weighted as the own seats' surrogate is (W[i, i] for a net of one seat;
+    # for several, the sum of their weights; 0 where "sample" mode drew another source), so that
+    # reuse does not raise the bonus against the learner's own experience. PPO only (TRPO has no bonus)
     entropy_by_weight: bool = False
     kl_threshold: float = 0.01  # TRPO delta
     cg_iters: int = 10
@@ -119,7 +120,7 @@ class TrainConfig:
     seac_lambda: float = 1.0  # weight of the other agents' importance-weighted terms
     seps_clusters: int | None = None  # None: the best Davies-Bouldin index over 2..n-1
     seps_pretrain_steps: int = 20_000  # env steps on one shared network before clustering; part of ``steps``
-    # Issue 22's SMAX settings (fields added last, at defaults that keep every committed run as it was)
+    # Issue 22's SMAX settings (at defaults that keep every committed run as it was)
     # lr, critic_lr (and a2c_lr) fall linearly over the run: iteration it (0-based) of N uses
     # lr * (1 - it / N), as JaxMARL's ANNEAL_LR; after the last iteration the rate is 0
     lr_anneal: bool = False
@@ -179,6 +180,11 @@ class TrainConfig:
         need(self.networks is None or isinstance(self.networks, str) and self.networks in NETWORKS, "networks",
              f"None or one of {list(NETWORKS)}")
         need(self.update_by in ("net", "seat"), "update_by", "['net', 'seat']")
+        if self.entropy_by_weight:
+            ppo = sorted(a for a, s in ALGOS.items() if not (s.trust_region or s.a2c))
+            need(not (ALGOS[self.algo].a2c or ALGOS[self.algo].trust_region) and self.entropy_coef > 0,
+                 "entropy_by_weight", f"False with algo {self.algo!r} and entropy_coef {self.entropy_coef!r}; it "
+                                      f"weights the entropy bonus of {ppo}, with entropy_coef > 0")
         if self.update_by == "seat":
             sequential = sorted(a for a in ALGOS if ALGOS[a].sequential)
             need(ALGOS[self.algo].sequential, "update_by", f"'net' with algo {self.algo!r}; updating seat by seat "

@@ -84,15 +84,15 @@ def summary(df: pd.DataFrame, sigmas=grid.SIGMAS) -> pd.DataFrame:
     each a mean over the seeds on disk."""
     out = []
     for (env, seed), run in df.groupby(["env", "seed"]):
-        n_it = run["iteration"].nunique()
+        steps = run.groupby("iteration")["step"].first()
         for stat in reuse.KL_REDUCES:
-            nearest = run.groupby(["iteration", "learner"])[stat].min().groupby("iteration").min()
+            nearest = run.groupby("iteration")[stat].min()  # the nearest pair of each iteration
             separation = kind_auc(run, stat) if run["same_kind"].any() and (~run["same_kind"]).any() else np.nan
             for sigma in sigmas:
                 open_its = nearest.index[nearest <= sigma]
                 out.append({"env": env, "seed": seed, "statistic": stat, "sigma": sigma,
-                            "open": len(open_its) / n_it, "pairs": float((run[stat] <= sigma).mean()),
-                            "last open": int(open_its.max()) * int(run["step"].iloc[0]) if len(open_its) else 0,
+                            "open": len(open_its) / len(steps), "pairs": float((run[stat] <= sigma).mean()),
+                            "last open": int(steps[open_its].max()) if len(open_its) else 0,
                             "auc": separation})
     return pd.DataFrame(out).groupby(["env", "statistic", "sigma"]).mean(numeric_only=True).drop(columns="seed")
 

@@ -128,27 +128,21 @@ def reduce_kl(kl: np.ndarray, reduce: str, active: np.ndarray | None = None) -> 
     with warnings.catch_warnings():  # an all-NaN row (a source that never acted) warns
         warnings.simplefilter("ignore", RuntimeWarning)
         q = np.nanquantile(np.where(on, kl, np.nan), 0.9, axis=-1)
-    return np.where(on.any(-1), q, 0.0)
+    # a NaN where the source acted (a diverged net) stays NaN, as in the other statistics
+    return np.where((np.isnan(kl) & on).any(-1), np.nan, np.where(on.any(-1), q, 0.0))
 
 
 def pairwise_kl(probs: np.ndarray, eps: float = 1e-12) -> np.ndarray:
-    """Per observation, KL(pi_j(.|o_j) || pi_i(.|o_j)) of categorical policies: ``probs[i, j]``
-    (batch, actions) is learner i's action distribution on agent j's observations, so
-    ``probs[j, j]`` is the source's own policy there. Returns (i, j, batch)."""
+    """Per observation, KL(pi_j(.|o_j) || pi_i(.|o_j)) of categorical policies, what Eq. 9's
+    D_KL^max(pi_j, pi_i) is estimated from (``reduce_kl``): ``probs[i, j]`` (batch, actions) is
+    learner i's action distribution on agent j's observations, so ``probs[j, j]`` is the
+    source's own policy there. Returns (i, j, batch)."""
     probs = np.asarray(probs, dtype=float)
     if probs.ndim != 4 or probs.shape[0] != probs.shape[1]:
         raise ValueError(f"probs must have shape (n, n, batch, actions), got {probs.shape}")
     n = probs.shape[0]
     own = probs[np.arange(n), np.arange(n)]  # (n_sources, batch, actions)
     return np.maximum(categorical_kl(own[None], probs, eps), 0.0)
-
-
-def kl_matrix(probs: np.ndarray, reduce: str = "max", eps: float = 1e-12) -> np.ndarray:
-    """Eq. 9's D_KL^max(pi_j, pi_i), estimated on each source's own observations:
-    K[i, j] = reduce_over_batch KL(pi_j(.|o_j) || pi_i(.|o_j)) (``pairwise_kl``, ``reduce_kl``)."""
-    if reduce not in KL_REDUCES:
-        raise ValueError(f"KL statistic must be one of {list(KL_REDUCES)}, got {reduce!r}")
-    return reduce_kl(pairwise_kl(probs, eps), reduce)
 
 
 def sample_mapping(m: np.ndarray, rng: np.random.Generator) -> np.ndarray:

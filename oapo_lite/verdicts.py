@@ -131,23 +131,27 @@ def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd.DataFrame:
-    """Per env and label (issue 31's table): seeds; the share of every iteration in which some
-    learner reused (``all_iterations``, means over the runs that recorded it); at the evaluated
-    iterations, the mean peer share and the mean share across networks (``peer_share`` with
-    ``owners[(env, label)]``, the network of each seat: reuse through Eq. 9's gate); and the
-    final ``y``, a run's mean over the last ``tail`` of its evaluation points, as mean and
-    standard deviation over seeds."""
+    """Per env and label (issue 31's table): seeds; the share of every iteration with any peer
+    weight (``all_iterations``, means over the runs that recorded it; seats that share a
+    network always weigh each other); at the evaluated iterations, the mean peer share, and,
+    across networks alone (``peer_share`` with ``owners[(env, label)]``, the network of each
+    seat: the reuse Eq. 9's gate decided), the share of them with any weight
+    (``across_reusing``) and the mean share (``mean_across_nets``); and the final ``y``, a run's
+    mean over the last ``tail`` of its evaluation points, as mean and standard deviation over
+    seeds. Runs without a reuse matrix (SEAC, SePS) have no row."""
     parts = []
-    for env, part in df.groupby("env", sort=False):
+    for env, part in df[df["reuse_matrix"].notna()].groupby("env", sort=False):
         final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
-        rated = part[part["reuse_matrix"].notna()]
-        across = rated.groupby("label", sort=False).apply(
-            lambda runs: runs["reuse_matrix"].map(lambda m: peer_share(m, owners[env, runs.name])).mean())
+        across = pd.Series([peer_share(m, owners[env, label]) for m, label in zip(part["reuse_matrix"], part["label"])],
+                           index=part.index)
+        per_seed = across.groupby([part["label"], part["seed"]], sort=False)
         parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
-                     .join(across.rename("mean_across_nets"))
+                     .join(per_seed.apply(lambda x: (x > 0).mean()).groupby(level=0, sort=False).mean()
+                           .rename("across_reusing"))
+                     .join(per_seed.mean().groupby(level=0, sort=False).mean().rename("mean_across_nets"))
                      .join(final.mean().rename("final")).join(final.std().rename("final_std"))
                      .assign(env=env).set_index("env", append=True).swaplevel())
-    return pd.concat(parts)
+    return pd.concat(parts) if parts else pd.DataFrame()
 
 
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:

@@ -292,7 +292,7 @@ def test_batched_actors_equal_separate_forwards():
 
 
 def test_kl_matrix_feeds_the_reuse_rule():
-    """The categorical KL matrix goes through reuse.kl_matrix: identical nets are at distance 0."""
+    """The categorical KLs go through reuse.pairwise_kl and reduce_kl: identical nets are at distance 0."""
     gen = torch.Generator().manual_seed(0)
     actors = Actors(2, 5, 3, (8,), False, gen)
     with torch.no_grad():

@@ -364,4 +364,6 @@ def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
     assert t["seeds"].tolist() == [2] * 4 and t["all_iterations"].tolist() == [1.0, 0.0, 1.0, 0.0]
     assert t["mean_peer_share"].tolist() == [0.5, 0.0, 0.5, 0.0]
     assert t["mean_across_nets"].tolist() == [0.0, 0.0, 0.5, 0.0]  # one net on e1: no reuse across nets
+    assert t["across_reusing"].tolist() == [0.0, 0.0, 1.0, 0.0]
+    assert v.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), "ret", owners).empty  # SEAC-like runs
     assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth: 1 and 2
