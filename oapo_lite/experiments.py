@@ -217,15 +217,14 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
 
 
 def seat_networks(figure: str, budget: str) -> dict[tuple[str, object], list[int]]:
-    """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``);
-    each env is built once, with one copy, to read its seats' kinds."""
+    """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``), from
+    each env's seat kinds (``registry.agent_types``)."""
     from oapo_lite.nets import owners
-    from oapo_lite.rollout import make_env
 
     kinds, out = {}, {}
     for label, cfg in figure_runs(figure, budget):
         if cfg.env not in kinds:
-            kinds[cfg.env] = make_env(cfg, 1, seed=0).agent_types
+            kinds[cfg.env] = env_registry.agent_types(cfg.env, cfg.max_steps)
         out[cfg.env, label] = owners(cfg.network_kind, kinds[cfg.env])
     return out
 

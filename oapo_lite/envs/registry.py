@@ -56,3 +56,13 @@ def make_vec(spec: str, n_envs: int, seed: int, max_steps: int):
     if prefix is None:
         return make_maze_vec(name, n_envs, max_steps, copy=False)
     return _engine(prefix).make_vec(name, n_envs, seed, max_steps)
+
+
+def agent_types(spec: str, max_steps: int) -> tuple[str, ...]:
+    """The kind of each seat of ``spec`` (``env.agent_types``), from the engine's scenario where it
+    can tell without building (SMAX: no compile), else from a one-copy env."""
+    prefix, name = split(spec)
+    engine = None if prefix is None else _engine(prefix)
+    if engine is not None and hasattr(engine, "agent_types"):
+        return engine.agent_types(name)
+    return make_vec(spec, 1, 0, max_steps).agent_types

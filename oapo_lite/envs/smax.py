@@ -50,15 +50,33 @@ def check(name: str) -> None:
 
 
 def _jaxmarl_smax():
-    """``jaxmarl.environments.smax``, imported with ``sys.stdout`` and ``sys.stderr`` kept:
-    importing jaxmarl replaces ``sys.stdout`` by a plain stream, which in a notebook kernel
-    sends every later print to the kernel's terminal instead of the notebook."""
+    """``jaxmarl.environments.smax``, imported quietly and with ``sys.stdout`` and ``sys.stderr``
+    kept: importing jaxmarl replaces ``sys.stdout`` by a plain stream, which in a notebook kernel
+    sends every later print to the kernel's terminal instead of the notebook, and then prints
+    two lines about environments it does not find, which land in whichever output captures the
+    process's file descriptor 1 (a notebook cell under one runner, a terminal under another)."""
+    if "jaxmarl.environments.smax" in sys.modules:
+        return sys.modules["jaxmarl.environments.smax"]
     out, err = sys.stdout, sys.stderr
+    out.flush()
+    saved, quiet = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(quiet, 1)
     try:
         import jaxmarl.environments.smax as smax
     finally:
+        sys.stdout.flush()  # the stream jaxmarl put there: its lines go to /dev/null
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(quiet)
         sys.stdout, sys.stderr = out, err
     return smax
+
+
+def agent_types(name: str) -> tuple[str, ...]:
+    """The unit type of every ally of scenario ``name``, read from the scenario (nothing compiled)."""
+    scenario = _scenario(name)
+    names = _jaxmarl_smax().SMAX(scenario=scenario).unit_type_names
+    return tuple(names[int(t)] for t in scenario.unit_types[:scenario.num_allies])
 
 
 def _scenario(name: str):
@@ -174,8 +192,7 @@ class SmaxVec:
         env = self._c.env
         self.name = name
         self.agents = tuple(env.agents)
-        names = env._env.unit_type_names  # the heuristic enemy wraps the SMAX env that names the types
-        self.agent_types = tuple(names[int(t)] for t in _scenario(name).unit_types[:env.num_allies])
+        self.agent_types = agent_types(name)
         self.n_agents = env.num_allies
         self.n_actions = env.num_ally_actions
         self.obs_dim = env.obs_size
