@@ -172,6 +172,13 @@ SWEEP_FAMILIES = (("happo", dict(algo="happo")), ("mappo", dict(algo="mappo")),
 SWEEP_LRS, SWEEP_ENTROPIES = (5e-4, 1e-3, 2e-3), (0.0, 0.01)
 
 
+# Issue 32: HARL's tuned HalfCheetah 2x3 HAPPO settings tried in our loop one at a time, then
+# together (feature normalisation is not an option of the loop yet), against App. A's cpu
+# settings, at 1M steps and 10 evaluation episodes
+HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=15), "128x3": dict(hidden=(128, 128, 128)),
+                    "20 x 200": dict(n_envs=20, rollout_len=200)}
+
+
 # Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.
 FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
@@ -314,6 +321,13 @@ GRID = (
                                                       if k not in ("lr", "critic_lr", "entropy_coef")}),
            runs_at=("cpu",), budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
+    Figure("fig_mamujoco_settings", (("happo", dict(algo="happo")),
+                                     *((f"happo {name}", dict(algo="happo", **kw)) for name, kw in HARL_HALFCHEETAH.items()),
+                                     ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
+                                                                           for k, v in kw.items()}))),
+           common=dict(env=HALFCHEETAH), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
