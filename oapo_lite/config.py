@@ -125,6 +125,9 @@ class TrainConfig:
     # lr * (1 - it / N), as JaxMARL's ANNEAL_LR; after the last iteration the rate is 0
     lr_anneal: bool = False
     value_norm: bool = True  # the critic regresses on running-normalised targets (HARL's ValueNorm)
+    # a LayerNorm on the inputs of every actor and of the critic (HARL's use_feature_normalization,
+    # on in its tuned MaMuJoCo settings); the PPO / TRPO family only
+    feature_norm: bool = False
 
     def __post_init__(self):
         def need(ok: bool, name: str, allowed: str):
@@ -173,7 +176,7 @@ class TrainConfig:
         real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
         need(self.kl_reduce in KL_REDUCES, "kl_reduce", str(list(KL_REDUCES)))
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
-        for name in ("lr_anneal", "value_norm", "entropy_by_weight"):
+        for name in ("lr_anneal", "value_norm", "entropy_by_weight", "feature_norm"):
             need(isinstance(getattr(self, name), (bool, np.bool_)), name, "True or False")
         need(self.bootstrap_truncation is None or isinstance(self.bootstrap_truncation, (bool, np.bool_)),
              "bootstrap_truncation", "None, True or False")
@@ -212,6 +215,7 @@ class TrainConfig:
         need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1),
              "seps_clusters", "None or an integer >= 1")
         if ALGOS[self.algo].a2c:
+            need(not self.feature_norm, "feature_norm", f"False with algo {self.algo!r} (its A2C networks have none)")
             need(self.networks is None, "networks", f"None with algo {self.algo!r} (SEAC has one network per agent, "
                                                     "SePS chooses its groups)")
             need(not self.bootstrap_truncation, "bootstrap_truncation",

@@ -173,10 +173,9 @@ SWEEP_LRS, SWEEP_ENTROPIES = (5e-4, 1e-3, 2e-3), (0.0, 0.01)
 
 
 # Issue 32: HARL's tuned HalfCheetah 2x3 HAPPO settings tried in our loop one at a time, then
-# together (feature normalisation is not an option of the loop yet), against App. A's cpu
-# settings, at 1M steps and 10 evaluation episodes
+# together, against App. A's cpu settings, at 1M steps and 10 evaluation episodes
 HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=15), "128x3": dict(hidden=(128, 128, 128)),
-                    "20 x 200": dict(n_envs=20, rollout_len=200)}
+                    "feature norm": dict(feature_norm=True), "20 x 200": dict(n_envs=20, rollout_len=200)}
 
 
 # Fig. 6b on GRF academy scenarios: every algorithm of the paper's table the project has.

@@ -116,11 +116,16 @@ class Actors(nn.Module):
 
     ``forward(obs, nets, avail)``: obs (k, M, obs_dim) and ``nets`` (k,) net indices; row r
     of the batch goes through net ``nets[r]``. Returns distribution parameters (k, M, P).
+    With ``feature_norm`` every net first normalises its input with its own LayerNorm (HARL's
+    ``use_feature_normalization``).
     """
 
     def __init__(self, n_nets: int, obs_dim: int, n_actions: int, hidden: tuple[int, ...],
-                 continuous: bool, gen: torch.Generator):
+                 continuous: bool, gen: torch.Generator, feature_norm: bool = False):
         super().__init__()
+        # LayerNorm's scale and shift per net (no random draws: a run without it is unchanged)
+        self.norms = nn.ModuleList(nn.ParameterList([nn.Parameter(torch.ones(obs_dim)), nn.Parameter(torch.zeros(obs_dim))])
+                                   for _ in range(n_nets if feature_norm else 0))
         self.head = Gaussian if continuous else Categorical
         sizes = (obs_dim, *hidden, n_actions)
         gains = [math.sqrt(2)] * len(hidden) + [0.01]  # HARL: ReLU gain, small output gain
@@ -140,21 +145,27 @@ class Actors(nn.Module):
     def net_params(self, k: int) -> list[nn.Parameter]:
         """The trainable tensors of net k (the log_std only for continuous actions)."""
         params = list(self.weights[k])
-        return params if self.head.continuous else params[:-1]
+        norm = list(self.norms[k]) if len(self.norms) else []
+        return norm + (params if self.head.continuous else params[:-1])
 
-    def stack(self, nets) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std),
-        every bias (k, 1, out), as ``baddbmm`` adds it (shaped once: a rollout applies one stack
-        at every step)."""
+    def stack(self, nets) -> tuple:
+        """The weights of ``nets``, stacked for a batched forward: ([w0, b0, w1, b1, ...], log_std,
+        the LayerNorms' (scale, shift) or None), every bias, scale and shift (k, 1, size), as
+        ``baddbmm`` adds it (shaped once: a rollout applies one stack at every step)."""
         per_net = [list(self.weights[int(k)]) for k in nets]  # indexing a ParameterList is slow
         layers = [_stack(layer) for layer in zip(*(w[:-1] for w in per_net))]
-        return [x if k % 2 == 0 else x.unsqueeze(1) for k, x in enumerate(layers)], _stack([w[-1] for w in per_net])
+        norm = None
+        if len(self.norms):
+            norm = tuple(_stack(part).unsqueeze(1) for part in zip(*(list(self.norms[int(k)]) for k in nets)))
+        return ([x if k % 2 == 0 else x.unsqueeze(1) for k, x in enumerate(layers)], _stack([w[-1] for w in per_net]),
+                norm)
 
-    def apply(self, stacked: tuple[list[torch.Tensor], torch.Tensor], obs: torch.Tensor,
-              avail: torch.Tensor | None) -> torch.Tensor:
+    def apply(self, stacked: tuple, obs: torch.Tensor, avail: torch.Tensor | None) -> torch.Tensor:
         """Forward with weights from ``stack`` (a rollout stacks once and applies every step)."""
-        layers, log_std = stacked
+        layers, log_std, norm = stacked
         x = obs
+        if norm is not None:
+            x = torch.nn.functional.layer_norm(x, x.shape[-1:]) * norm[0] + norm[1]
         for k in range(0, len(layers), 2):
             x = torch.baddbmm(layers[k + 1], x, layers[k])
             if k < len(layers) - 2:
@@ -174,10 +185,10 @@ def _stack(tensors) -> torch.Tensor:
 class Critic(nn.Module):
     """The centralised critic V(s) (Algorithm 1 line 4), predicting normalised values."""
 
-    def __init__(self, state_dim: int, hidden: tuple[int, ...], gen: torch.Generator):
+    def __init__(self, state_dim: int, hidden: tuple[int, ...], gen: torch.Generator, feature_norm: bool = False):
         super().__init__()
         sizes = (state_dim, *hidden, 1)
-        layers: list[nn.Module] = []
+        layers: list[nn.Module] = [nn.LayerNorm(state_dim)] if feature_norm else []  # HARL's feature normalisation
         for k, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
             last = k == len(sizes) - 2
             lin = nn.Linear(fan_in, fan_out)

@@ -67,7 +67,7 @@ class RunState:
         torch.manual_seed(cfg.seed)
         init_gen = torch.Generator().manual_seed(cfg.seed)
         actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,
-                        env.continuous, init_gen)
+                        env.continuous, init_gen, cfg.feature_norm)
         learner = (A2CLearner if ALGOS[cfg.algo].a2c else Learner)(cfg, env, actors, init_gen)
         act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))
         return cls(cfg, env, eval_env, actors, learner, act_gen, env.reset())

@@ -289,7 +289,8 @@ class Learner:
             reuse.check_spaces(env, same_net)
         # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
-        self.critic, self.value_norm = Critic(env.state_dim, cfg.hidden, gen), ValueNorm(enabled=cfg.value_norm)
+        self.critic = Critic(env.state_dim, cfg.hidden, gen, cfg.feature_norm)
+        self.value_norm = ValueNorm(enabled=cfg.value_norm)
         # one optimiser per net: Adam would move a net that got no gradient through its momentum;
         # trust-region algorithms step by hand
         self.actor_opts = [] if self.spec.trust_region else [

@@ -293,6 +293,7 @@ def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
     (dict(entropy_by_weight=1), ["entropy_by_weight = 1", "True or False"]),
     (dict(algo="oatrpo", entropy_by_weight=True), ["entropy_by_weight = True", "False with algo 'oatrpo'"]),
     (dict(entropy_coef=0.0, entropy_by_weight=True), ["entropy_by_weight = True", "entropy_coef 0.0"]),
+    (dict(algo="seac", feature_norm=True), ["feature_norm = True", "False with algo 'seac'"]),
     (dict(env=None), ["env = None", "map"]),
     (dict(env=""), ["env = ''", "map"]),
     (dict(env_fn=5), ["env_fn = 5", "callable"]),

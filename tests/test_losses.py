@@ -349,3 +349,34 @@ def test_adam_is_torchs_foreach_adam_bit_for_bit_and_shares_its_checkpoints():
     assert all(torch.equal(ours_state[i][key], torchs_state[i][key]) for i in ours_state for key in ours_state[i])
     with pytest.raises(ValueError, match="2 parameter groups given; allowed: one"):
         Adam([{"params": [torch.zeros(1)]}, {"params": [torch.zeros(1)]}], lr=1e-2, eps=1e-5)
+
+
+def test_feature_norm_is_a_layernorm_per_net_in_front_of_each_mlp():
+    """HARL's feature normalisation: each net's output is its MLP on nn.LayerNorm(obs) with the
+    net's own scale and shift, so it does not change when an observation is scaled and shifted;
+    without it the first layer sees the raw observation."""
+    gen = torch.Generator().manual_seed(0)
+    actors = Actors(2, obs_dim=6, n_actions=3, hidden=(8,), continuous=False, gen=gen, feature_norm=True)
+    with torch.no_grad():
+        for k in range(2):
+            actors.norms[k][0].uniform_(0.5, 1.5, generator=gen)
+            actors.norms[k][1].uniform_(-0.5, 0.5, generator=gen)
+    obs = torch.randn(2, 5, 6, generator=gen)
+    avail = torch.ones(2, 5, 3, dtype=torch.bool)
+    out = actors(obs, [0, 1], avail)
+    for k in range(2):
+        ln = torch.nn.LayerNorm(6)
+        with torch.no_grad():
+            ln.weight.copy_(actors.norms[k][0])
+            ln.bias.copy_(actors.norms[k][1])
+        w0, b0, w1, b1 = list(actors.weights[k])[:4]
+        ref = torch.log_softmax(torch.relu(ln(obs[k]) @ w0 + b0) @ w1 + b1, -1)
+        torch.testing.assert_close(out[k], ref)
+    torch.testing.assert_close(actors(3.0 * obs + 2.0, [0, 1], avail), out, atol=1e-4, rtol=1e-4)
+    assert len(actors.net_params(0)) == 2 + 4  # the LayerNorm's scale and shift are trained with the net
+    plain = Actors(2, 6, 3, (8,), False, torch.Generator().manual_seed(0))
+    assert plain.stack([0, 1])[2] is None and not torch.allclose(plain(3.0 * obs + 2.0, [0, 1], avail),
+                                                                 plain(obs, [0, 1], avail))
+    critic = Critic(6, (8,), torch.Generator().manual_seed(0), feature_norm=True)
+    states = torch.randn(4, 6, generator=gen)
+    torch.testing.assert_close(critic(5.0 * states - 1.0), critic(states), atol=1e-4, rtol=1e-4)

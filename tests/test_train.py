@@ -603,3 +603,16 @@ def test_every_iteration_records_its_reuse_and_the_rows_its_share(tmp_path, algo
     assert [h["peer_share"] for h in history] == pytest.approx([share] * 6)
     assert rows["iterations_reusing"].isna().iloc[0]  # before any iteration
     assert rows["iterations_reusing"].iloc[1:].tolist() == [float(share > 0)] * 2
+
+
+@pytest.mark.parametrize("algo", ["happo", "oatrpo"])
+def test_feature_norm_trains_its_layernorms_and_resumes_to_the_uninterrupted_numbers(tmp_path, algo):
+    """HARL's feature normalisation as an option: its scale and shift are trained (they leave
+    1 and 0), are checkpointed, and a resumed run ends as the uninterrupted one."""
+    cfg = TrainConfig(algo=algo, steps=160 * 5, checkpoint_every=2, feature_norm=True, **TINY)
+    full = train(cfg, tmp_path / "full", progress=False)
+    fakes.interrupt(cfg, tmp_path / "resumed", at=3)
+    _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
+    params = _params(tmp_path, "full")
+    assert not torch.equal(params["norms.0.0"], torch.ones_like(params["norms.0.0"]))
+    assert load_checkpoint(tmp_path / "full")["critic"]["net.0.weight"].ndim == 1  # the critic's LayerNorm comes first
