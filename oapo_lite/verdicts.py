@@ -154,6 +154,22 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     return pd.concat(parts) if parts else pd.DataFrame()
 
 
+def sweep_table(df: pd.DataFrame, family: dict, metric: Metric, tie: float = 0.02) -> pd.DataFrame:
+    """A tuning sweep, one row per setting (curve label): its ``family[label]``, seeds, final
+    value (mean over seeds of each run's last fifth of evaluations) and env steps to the
+    metric's threshold (IQM over seeds, a run that never gets there counted at its end); and
+    ``chosen`` by the sweep's rule: per family the highest final value, where settings within
+    ``tie`` of it tie and the fewest steps among them wins."""
+    runs = per_run(df, metric.threshold, tail=0.2, y=metric.column)
+    t = runs.groupby("label", sort=False).agg(seeds=("seed", "size"), final=("final", "mean"),
+                                              steps=("steps_to_threshold", lambda s: float(iqm(s.to_numpy()))))
+    t.insert(0, "family", [family[label] for label in t.index])
+    best = t.groupby("family")["final"].transform("max")
+    contenders = t[t["final"] >= best - tie]
+    t["chosen"] = t.index.isin(contenders.sort_values("steps", kind="stable").groupby("family").head(1).index)
+    return t
+
+
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby("label", sort=False)
     gain = (runs["final"] - runs["initial"]).groupby(runs["label"], sort=False)

@@ -367,3 +367,17 @@ def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
     assert t["across_reusing"].tolist() == [0.0, 0.0, 1.0, 0.0]
     assert v.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), "ret", owners).empty  # SEAC-like runs
     assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth: 1 and 2
+
+
+def test_sweep_table_chooses_the_best_final_value_and_breaks_ties_by_speed():
+    """Family f: a ends at 0.9, b at 0.89 (a tie within 0.02) and reaches 0.5 sooner, c at 0.5;
+    family g has one setting. b and the lone setting are chosen."""
+    rows = []
+    for label, level, reach in (("a", 0.9, 8), ("b", 0.89, 2), ("c", 0.5, 9), ("d", 0.3, 10)):
+        for seed in (0, 1):
+            rows += [{"label": label, "seed": seed, "step": s * 10, "eval_success": level if s >= reach else 0.0}
+                     for s in range(10)]
+    t = v.sweep_table(pd.DataFrame(rows), {"a": "f", "b": "f", "c": "f", "d": "g"}, v.WIN_RATE)
+    assert t["chosen"].to_dict() == {"a": False, "b": True, "c": False, "d": True}
+    assert t.loc["b", "steps"] == 20 and t.loc["d", "steps"] == 90  # never reached 0.5: counted at its end
+    assert t.loc["a", "final"] == pytest.approx(0.9) and t["seeds"].tolist() == [2] * 4
