@@ -27,9 +27,9 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
 
 def test_the_readme_carries_the_claims_table_the_data_gives():
     """The README's copy of the claims table is what the committed runs give today."""
-    block = claims.readme_block()
-    assert block == claims.markdown(claims.glance()), "the README's claims table is stale: run python -m oapo_lite.claims"
-    assert block.count("\n") == sum(len(f.claims) for f in grid.GRID) + 1  # a header, a rule, a row per claim
+    block, table = claims.readme_block(), claims.glance()
+    assert block == claims.readme_markdown(table), "the README's claims table is stale: run python -m oapo_lite.claims"
+    assert block.endswith(claims.markdown(table)) and len(claims.MEANING) == len(set(claims.SHORT.values()))
 
 
 def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
@@ -61,3 +61,26 @@ def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
             for label, f in chosen["family"].items()} == grid.A2C_CHOSEN
+
+
+# the condition each status's reason states (``verdicts._reason``, ``faster``'s veto, ``_undecidable``,
+# ``reuse_gap``), so that a row can be checked to give the reason of its own status and no other's
+REASONS = {
+    verdicts.REPRODUCED: r": wholly (above|below|at or above) ", verdicts.CONTRADICTED: r": wholly on the other side of ",
+    verdicts.DIRECTION: r": point estimate [^;]*, interval across ", verdicts.NOT: r"(: point estimate not |cannot count$)",
+    verdicts.NOT_REUSE: r"reused at \d+% of its evaluated iterations .* below \d+%$",
+    verdicts.NOT_TESTABLE: r"(did not learn|fewer than 2 seeds on disk|^no seed of .* reached)", claims.NOT_RUN: claims.NO_RUN,
+}
+
+
+def test_every_row_of_the_glance_gives_the_reason_of_its_own_status_and_no_other():
+    import re
+
+    table = claims.glance()
+    pairs = list(zip(table["verdict"], table["why"])) + [
+        (v, why) for v, why in zip(table["at 5 seeds"], table["why at 5 seeds"]) if v != "-"]
+    for status, why in pairs:
+        assert re.search(REASONS[status], why), (status, why)
+        assert not [s for s, pattern in REASONS.items() if s != status and re.search(pattern, why)], (status, why)
+    # the summary counts every claim once, a row of claims without runs as its claims
+    assert claims.summary(table).to_numpy().sum() == sum(len(f.claims) for f in grid.GRID if f.claims)
