@@ -89,7 +89,7 @@ NOT_RUN = "not run"  # a claim about an env with no run at this budget: no data,
 MEANING = {
     verdicts.REPRODUCED: "the whole 95% interval is on the paper's side",
     verdicts.DIRECTION: "the point estimate is on the paper's side, the interval is not: within noise",
-    verdicts.NOT: "the point estimate is not on the paper's side (or, for \"faster\", fewer seeds reached)",
+    verdicts.NOT: "the point estimate is not on the paper's side",
     verdicts.CONTRADICTED: "the whole 95% interval is on the other side",
     verdicts.NOT_REUSE: "OAPPO / OATRPO hardly reused while it learned, so the claim says nothing about reuse",
     verdicts.NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
