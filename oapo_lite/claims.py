@@ -163,6 +163,26 @@ def readme_block(path: Path = README) -> str:
     return text.split(BEGIN, 1)[1].split(END, 1)[0].strip()
 
 
+SECTIONS = {"6.1": "the mazes", "6.2": "SMAC on SMAX", "6.3": "Google Research Football", "App. A": "multi-agent MuJoCo"}
+
+
+def conclusion(df: pd.DataFrame) -> list[str]:
+    """What the reproduction found, one paragraph per section of ``glance``: each status with
+    the claims that have it, in the table's words."""
+    out = []
+    for section, part in df.groupby("section", sort=False):
+        n = int(summary(part).to_numpy().sum())
+        budgets = sorted(set(part.loc[part["verdict"] != NOT_RUN, "budget"]))
+        lines = [f"Section {section} ({SECTIONS.get(section, section)}), {n} claims"
+                 + (f", at {'; '.join(budgets)}" if len(budgets) == 1 else "") + ":"]
+        for status, short in SHORT.items():
+            these = part.loc[part["verdict"] == status, "claim"]
+            if len(these):
+                lines.append(f"{short}: {'; '.join(these)}.")
+        out.append(" ".join(lines))
+    return out
+
+
 def readme_markdown(df: pd.DataFrame) -> str:
     """What the README carries between its markers: the summary, the statuses, the table."""
     statuses = "\n".join(f"- *{status}*: {meaning}." for status, meaning in MEANING.items())

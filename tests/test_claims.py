@@ -84,3 +84,17 @@ def test_every_row_of_the_glance_gives_the_reason_of_its_own_status_and_no_other
         assert not [s for s, pattern in REASONS.items() if s != status and re.search(pattern, why)], (status, why)
     # the summary counts every claim once, a row of claims without runs as its claims
     assert claims.summary(table).to_numpy().sum() == sum(len(f.claims) for f in grid.GRID if f.claims)
+
+
+def test_the_conclusion_names_every_claim_once_under_its_status():
+    import re
+
+    table = claims.glance()
+    labels = "|".join(sorted(map(re.escape, claims.SHORT.values()), key=len, reverse=True))
+    under = {}  # (section, status) -> the text the paragraph gives under it
+    for section, text in zip(table["section"].unique(), claims.conclusion(table)):
+        parts = re.split(rf"(?:^|(?<=[.:]) )({labels}): ", text)
+        under |= {(section, status): body for status, body in zip(parts[1::2], parts[2::2])}
+    for section, claim, status in zip(table["section"], table["claim"], table["verdict"]):
+        assert claim in under[section, claims.SHORT[status]], (section, status, claim)
+    assert sum(text.count("; ") + 1 for text in under.values()) >= len(table)
