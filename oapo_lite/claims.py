@@ -93,7 +93,7 @@ MEANING = {
     verdicts.CONTRADICTED: "the whole 95% interval is on the other side",
     verdicts.NOT_REUSE: "OAPPO / OATRPO hardly reused while it learned, so the claim says nothing about reuse",
     verdicts.NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
-    NOT_RUN: "the env has no run at this budget (its `paper` budget is a cluster's job)",
+    NOT_RUN: "the env has no run on disk at this budget (not trained yet, or only at `paper`, a cluster's job)",
 }
 SHORT = {verdicts.REPRODUCED: "held", verdicts.DIRECTION: "within noise", verdicts.NOT: "not held",
          verdicts.CONTRADICTED: "contradicted", verdicts.NOT_REUSE: "not a test of reuse",
@@ -130,7 +130,7 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
         for env, texts in unrun.items():
             rows.append({"section": fig.section, "claim": f"{env.removeprefix(fig.claims_per_env or '')}: {len(texts)} "
                                                          f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
-                         "notebook": fig.notebook, "verdict": NOT_RUN, "budget": budget_share(fig, env, budgets[0]),
+                         "notebook": fig.notebook, "verdict": NOT_RUN, "budget": budget_share(fig, env, budgets[0], 0),
                          "why": NO_RUN, "at 5 seeds": "-", "why at 5 seeds": "-"})
     return pd.DataFrame(rows)
 
