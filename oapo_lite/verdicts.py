@@ -28,6 +28,10 @@ The decision rule (``RULE``, printed where the verdicts are introduced) reads, i
 3. "faster" is *not reproduced* whenever fewer seeds of a than of b reached the threshold,
    whatever P says: a seed that never got there is not evidence of speed, and the reason is
    printed with the verdict.
+4. (checked right after step 1) a claim that OAPPO or OATRPO beats another algorithm is
+   *not a test of reuse* when that
+   curve hardly reused while it learned (``REUSE_PART``); the status says so and when the gate
+   last opened (the interval is kept as evidence).
 
 A curve *learned* at a budget when its runs' final level exceeds their initial level (the
 mean of the first evaluations, the untrained policy) by more than twice the standard error
@@ -37,18 +41,24 @@ lucky seed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
+from oapo_lite.config import ALGOS
 from oapo_lite.reuse import peer_share
 
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
 CONTRADICTED, NOT_TESTABLE = "contradicted", "not testable at this budget"
+NOT_REUSE = "not a test of reuse"
+# a curve reusing by Eq. 9 tests reuse when some peer weight was given at this share of its
+# evaluated iterations while it learned (issue 31's share for "the gate operates")
+REUSE_PART = 0.25
+EQ9_ALGOS = tuple(a for a, spec in ALGOS.items() if spec.reuse == "oapo")
 LEARN_SE = 2.0  # a curve learned when its gain exceeds this many standard errors over seeds
 CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
@@ -86,6 +96,8 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
         k = max(1, int(round(tail * len(run))))
+        steps, shares = _peer_shares(run)
+        learning = steps <= (hit.iloc[0] if len(hit) else np.inf)
         rows.append({
             "label": label,
             "seed": seed,
@@ -95,8 +107,19 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
             "final": float(run[y].iloc[-k:].mean()),
             "peak": float(run[y].max()),
             "drawdown": float((run[y].cummax() - run[y]).max()),
+            "reusing": float(np.mean(shares[learning] > 0)) if learning.any() else np.nan,
+            "last_reuse_step": float(steps[shares > 0].max()) if (shares > 0).any() else np.nan,
         })
     return pd.DataFrame(rows)
+
+
+def _peer_shares(run: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(step, ``peer_share`` of M) at a run's evaluated iterations that recorded M (none for
+    SEAC, SePS, or data without the column)."""
+    if "reuse_matrix" not in run:
+        return np.zeros(0), np.zeros(0)
+    run = run[run["reuse_matrix"].notna()]
+    return run["step"].to_numpy(float), run["reuse_matrix"].map(peer_share).to_numpy(float)
 
 
 def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
@@ -108,13 +131,12 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     without a reuse matrix (SEAC, SePS) have no row."""
     rows = []
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
-        run = run[run["reuse_matrix"].notna()]
-        if run.empty:  # SEAC, SePS: no reuse matrix
+        steps, share = _peer_shares(run)
+        if not len(steps):  # SEAC, SePS: no reuse matrix
             continue
-        share = run["reuse_matrix"].map(peer_share).to_numpy(float)
-        reusing = run["step"].to_numpy()[share > 0]
+        reusing = steps[share > 0]
         every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run else np.nan
-        rows.append({"label": label, "seed": seed, "evaluations": len(run), "reusing": float(np.mean(share > 0)),
+        rows.append({"label": label, "seed": seed, "evaluations": len(steps), "reusing": float(np.mean(share > 0)),
                      "mean_peer_share": float(share.mean()),
                      "last_reuse_step": float(reusing.max()) if len(reusing) else np.nan, "all_iterations": float(every)})
     return pd.DataFrame(rows)
@@ -183,6 +205,8 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
         "initial_mean": g["initial"].mean(),
         "gain_mean": gain.mean(),
         "gain_se": gain.std(ddof=1) / np.sqrt(gain.size()),  # NaN with one seed
+        "reusing": g["reusing"].mean(),  # NaN where no run recorded M
+        "last_reuse_step": g["last_reuse_step"].max(),
     })
 
 
@@ -262,6 +286,8 @@ class Evidence:
         self.metric = metric
         self.runs = per_run(df, self.threshold, y=metric.column)
         self.summary = _summary_of(self.runs)
+        # each curve's algorithm (where the data names it): which curves reuse by Eq. 9
+        self.algos = df.groupby("label", sort=False)["algo"].first().to_dict() if "algo" in df else {}
 
     def values(self, label, stat: str) -> np.ndarray:
         """Per-seed values of the per-run statistic ``stat`` (a key of ``RUN_STATS``) for one curve."""
@@ -303,11 +329,15 @@ RULE = f"""How a verdict is decided (oapo_lite.verdicts), in this order:
    level is not above its initial level by more than {LEARN_SE:g} standard errors of the gain over
    seeds, or ends at or below the metric's floor: a 5% win rate or score), or, for "faster",
    no seed of either curve reached the threshold.
-2. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
+2. Not a test of reuse: a claim that a curve reusing by Eq. 9 (OAPPO, OATRPO) beats a curve of
+   another algorithm, where that curve gave some peer's experience a positive weight at fewer
+   than {REUSE_PART:.0%} of its evaluated iterations while it learned (up to its first reaching the
+   threshold; all of them if it never did), mean over seeds; it says when the gate last opened.
+3. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
    P(a better than b) (or of the final IQM, for "stays below" / "reaches") is on the claimed
    side of 0.5 (of the threshold), contradicted when it is wholly on the other side,
    direction only when just the point estimate is on the claimed side, not reproduced otherwise.
-3. "Faster" is not reproduced whenever fewer seeds of the faster-claimed curve reached the
+4. "Faster" is not reproduced whenever fewer seeds of the faster-claimed curve reached the
    threshold, whatever P says; the verdict then names the counts."""
 
 
@@ -470,11 +500,31 @@ def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     return None
 
 
+def reuse_gap(ev: Evidence, labels) -> str | None:
+    """Why a claim about ``labels`` cannot test off-agent reuse (``RULE``, step 2), or None: it
+    says a curve reusing by Eq. 9 beats another algorithm's, and that curve hardly reused."""
+    if len(labels) != 2 or ev.algos.get(labels[0]) not in EQ9_ALGOS or ev.algos.get(labels[0]) == ev.algos.get(labels[1]):
+        return None
+    a, s = labels[0], ev.summary.loc[labels[0]]
+    if s["reusing"] >= REUSE_PART:
+        return None
+    if np.isnan(s["reusing"]):
+        return f"{a}'s runs hold no reuse matrix, so whether it reused is unknown"
+    last = ("no seed ever gave a peer weight" if np.isnan(s["last_reuse_step"])
+            else f"the gate last opened at {s['last_reuse_step']:,.0f} steps")
+    return (f"{last}; {a} reused at {s['reusing']:.0%} of its evaluated iterations while it learned (mean over "
+            f"seeds), below {REUSE_PART:.0%}")
+
+
 def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     """``test(ev, *labels, claim)`` if the data can decide it (``RULE``, step 1), else a
-    ``NOT_TESTABLE`` verdict saying why: for claims a notebook makes beyond the grid's."""
+    ``NOT_TESTABLE`` verdict saying why: for claims a notebook makes beyond the grid's. A claim
+    that cannot test reuse (step 2) keeps the test's evidence under ``NOT_REUSE``."""
     why = _undecidable(ev, test, labels)
-    return Verdict(claim, NOT_TESTABLE, "", "", why) if why else test(ev, *labels, claim)
+    if why:
+        return Verdict(claim, NOT_TESTABLE, "", "", why)
+    verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
+    return replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
 
 
 def claims(figure, df: pd.DataFrame) -> list[Verdict]:

@@ -48,3 +48,16 @@ def test_glance_budgets_are_shares_of_the_paper():
         "32k steps x 3 seeds = 0.13% of 25M (HARL's tuned GRF steps)"
     assert claims.budget_share("fig4_smax", "smax:6h_vs_8z") == "500k steps x 3 seeds = 1.2% of 40M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:MMM2_like_7m2M_vs_8m3M").startswith("not run at `cpu`")
+
+
+def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
+    """``grid.A2C_CHOSEN`` is the setting ``verdicts.sweep_table``'s rule picks from the committed
+    SEAC / SePS sweep on 3m, per algorithm."""
+    from oapo_lite import experiments
+
+    df = experiments.read_figure("fig_a2c_smax", "cpu")[0]
+    family = {label: label.split()[0] for label in df["label"].unique()}
+    table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
+    chosen = table[table["chosen"]]
+    assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
+            for label, f in chosen["family"].items()} == grid.A2C_CHOSEN

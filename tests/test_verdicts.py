@@ -326,7 +326,7 @@ def test_two_learned_curves_with_p_above_one_half_are_reproduced():
 
 def test_the_printed_rule_names_every_status_and_the_veto():
     for word in ("Not testable", "did not learn", "reproduced", "contradicted", "direction only",
-                 "not reproduced", "fewer seeds"):
+                 "not reproduced", "fewer seeds", "Not a test of reuse", "25%"):
         assert word in v.RULE
 
 
@@ -381,3 +381,76 @@ def test_sweep_table_chooses_the_best_final_value_and_breaks_ties_by_speed():
     assert t["chosen"].to_dict() == {"a": False, "b": True, "c": False, "d": True}
     assert t.loc["b", "steps"] == 20 and t.loc["d", "steps"] == 90  # never reached 0.5: counted at its end
     assert t.loc["a", "final"] == pytest.approx(0.9) and t["seeds"].tolist() == [2] * 4
+
+
+# --- a claim about OAPPO tests reuse only where reuse happened (issue 32) -------------------
+
+SHARED, OWN = np.array([[0.7, 0.3], [0.3, 0.7]]), np.eye(2)
+
+
+def with_reuse(df, reusing):
+    """``df`` with each curve's algorithm (its label) and its reuse matrix M per evaluation:
+    ``reusing[label]`` picks the steps at which M gave a peer weight (others: M = I)."""
+    df = df.assign(algo=df["label"])
+    df["reuse_matrix"] = [SHARED if label in reusing and reusing[label](step) else OWN
+                          for label, step in zip(df["label"], df["step"])]
+    return df
+
+
+def test_a_claim_about_oappo_is_no_test_of_reuse_when_its_gate_closed_early():
+    # OAPPO reaches the optimum at 50k (evaluation 10 of 21) but gave peers weight only at the
+    # first 2 evaluations (0 and 5k): 2 of the 11 up to its threshold, 18% < 25%
+    base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
+    closed = with_reuse(base, {"oappo": lambda s: s <= 5_000, "oatrpo": lambda s: True})
+    out = {x.claim: x for x in v.claims("fig3b", closed)}
+    verdict = out["OAPPO converges faster than HAPPO"]
+    assert verdict.status == v.NOT_REUSE
+    assert verdict.reason == ("the gate last opened at 5,000 steps; oappo reused at 18% of its evaluated iterations "
+                              "while it learned (mean over seeds), below 25%")
+    assert verdict.estimate.startswith("P(oappo faster) 1.000")  # the interval stays as evidence
+    assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
+    # OATRPO reused throughout: its claims are decided by the interval as before
+    assert out["OATRPO converges faster than HAPPO"].status == v.REPRODUCED
+    # a gate open at every evaluation makes the same data a test of reuse
+    opened = with_reuse(base, {"oappo": lambda s: True, "oatrpo": lambda s: True})
+    assert {x.claim: x for x in v.claims("fig3b", opened)}["OAPPO converges faster than HAPPO"].status == v.REPRODUCED
+
+
+def test_reuse_is_counted_while_the_curve_learns_and_at_least_a_quarter_is_enough():
+    base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
+    # reuse until the threshold (50k), none after: every iteration that learned reused
+    learning = v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 50_000}))
+    assert learning.summary.loc["oappo", "reusing"] == 1.0
+    assert v.reuse_gap(learning, ("oappo", "happo")) is None
+    # reuse only after the threshold, at 10 of 21 evaluations of the whole run: no test of reuse
+    after = v.Evidence(with_reuse(base, {"oappo": lambda s: s > 50_000}))
+    assert after.summary.loc["oappo", "reusing"] == 0.0
+    assert after.summary.loc["oappo", "last_reuse_step"] == 100_000
+    assert "reused at 0% of its evaluated iterations" in v.reuse_gap(after, ("oappo", "happo"))
+    # the boundary: 3 of 11 evaluations (27%) is a test, 2 of 11 (18%) is not
+    assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 10_000})), ("oappo", "happo")) is None
+    assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 5_000})), ("oappo", "happo"))
+    # never reused at all; no reuse matrix on record
+    never = v.Evidence(with_reuse(base, {}))
+    assert v.reuse_gap(never, ("oappo", "happo")).startswith("no seed ever gave a peer weight; oappo reused at 0%")
+    unknown = v.Evidence(base.assign(algo=base["label"]))
+    assert v.reuse_gap(unknown, ("oappo", "happo")) == "oappo's runs hold no reuse matrix, so whether it reused is unknown"
+
+
+def test_only_claims_that_eq9_reuse_beats_another_algorithm_need_reuse():
+    base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
+    ev = v.Evidence(with_reuse(base, {}))  # nobody reuses
+    assert v.reuse_gap(ev, ("happo", "mappo")) is None  # HAPPO does not reuse by Eq. 9
+    assert v.reuse_gap(ev, ("oappo",)) is None  # "stuck" / "optimal": one curve
+    same = ev.algos | {"oatrpo": "oappo"}  # two OAPPO curves (a sigma or lambda sweep)
+    ev.algos = same
+    assert v.reuse_gap(ev, ("oatrpo", "oappo")) is None
+    assert v.reuse_gap(v.Evidence(base), ("oappo", "happo")) is None  # no algorithm named: nothing to check
+
+
+def test_not_testable_comes_before_not_a_test_of_reuse():
+    df = with_reuse(_fig3b({"mappo": (90_000, 0.6), "happo": flat(-0.5), "oappo": (50_000, 1.0),
+                            "oatrpo": (30_000, 1.0)}), {})
+    out = {x.claim: x for x in v.claims("fig3b", df)}
+    assert out["OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
+    assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
