@@ -179,11 +179,14 @@ SWEEP_FAMILIES = {"happo": dict(algo="happo"), "mappo": dict(algo="mappo"),
 SWEEP_LRS, SWEEP_ENTROPIES = (5e-4, 1e-3, 2e-3), (0.0, 0.01)
 # what the rule chose per family, as (lr, entropy) (ASSUMPTIONS.md; a test re-derives it from the
 # committed runs)
-SWEEP_CHOSEN = {"happo": (2e-3, 0.01), "mappo": (2e-3, 0.0), "oappo type": (2e-3, 0.0), "oappo one seat": (5e-4, 0.0)}
+# then the PPO clip at each family's best (lr, entropy), the same rule over all its settings
+SWEEP_CLIPS = (0.1, 0.05)
+SWEEP_CHOSEN = {"happo": (2e-3, 0.01, 0.2), "mappo": (2e-3, 0.0, 0.2), "oappo type": (2e-3, 0.0, 0.2),
+                "oappo one seat": (5e-4, 0.0, 0.2)}
 
 
-def _swept(lr: float, entropy: float) -> dict:
-    return dict(lr=lr, critic_lr=lr, entropy_coef=entropy)
+def _swept(lr: float, entropy: float, clip: float = TrainConfig.clip) -> dict:
+    return dict(lr=lr, critic_lr=lr, entropy_coef=entropy, clip=clip)
 
 
 def tuned(family: str) -> dict:
@@ -380,7 +383,9 @@ GRID = (
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
     Figure("fig_sweep_2s3z", tuple((f"{name} lr={lr:g} ent={ent:g}", dict(kw, **_swept(lr, ent)))
-                                   for name, kw in SWEEP_FAMILIES.items() for lr in SWEEP_LRS for ent in SWEEP_ENTROPIES),
+                                   for name, kw in SWEEP_FAMILIES.items() for lr in SWEEP_LRS for ent in SWEEP_ENTROPIES)
+           + tuple((f"{name} lr={SWEEP_CHOSEN[name][0]:g} ent={SWEEP_CHOSEN[name][1]:g} clip={clip:g}",
+                    dict(kw, **_swept(*SWEEP_CHOSEN[name][:2], clip))) for name, kw in SWEEP_FAMILIES.items() for clip in SWEEP_CLIPS),
            common=dict(SMAX_BATCH, env="smax:2s3z", **SMAX_TUNED),
            runs_at=("cpu",), budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
