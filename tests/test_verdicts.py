@@ -454,3 +454,12 @@ def test_not_testable_comes_before_not_a_test_of_reuse():
     out = {x.claim: x for x in v.claims("fig3b", df)}
     assert out["OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
     assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
+
+
+def test_a_returns_final_value_is_its_last_fifth_and_its_initial_its_first_tenth():
+    # 21 evaluation points: the last fifth is the last 4, the first tenth the first 2
+    steps = np.arange(0, 21)
+    df = pd.DataFrame(dict(label="a", seed=0, step=steps, eval_return=steps.astype(float)))
+    run = v.Evidence(df, metric=v.RETURN).runs.iloc[0]
+    assert run["final"] == np.mean([17, 18, 19, 20]) and run["initial"] == np.mean([0, 1])
+    assert v.Evidence(df.rename(columns={"eval_return": "frac_opt"})).runs.iloc[0]["final"] == np.mean([19, 20])
