@@ -61,3 +61,16 @@ def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
             for label, f in chosen["family"].items()} == grid.A2C_CHOSEN
+
+
+def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
+    """``grid.SWEEP_CHOSEN`` (Fig. 4's learning rate, entropy and clip per family) is what the
+    sweep's rule picks from the committed 2s3z sweep."""
+    from oapo_lite import experiments
+
+    df = experiments.read_figure("fig_sweep_2s3z", "cpu")[0]
+    family = {label: label.split(" lr=")[0] for label in df["label"].unique()}
+    table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
+    chosen = table[table["chosen"]]
+    assert {f: tuple(df.loc[df["label"] == label, ["lr", "entropy_coef", "clip"]].iloc[0])
+            for label, f in chosen["family"].items()} == grid.SWEEP_CHOSEN
