@@ -401,6 +401,14 @@ GRID = (
            common=dict(env=HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # Issue 32: App. A's HAPPO settings (15 epochs) on the same robot with one agent (all six
+    # joints, the full observation), beside the two-leg HAPPO: what the split into two agents costs
+    # in our loop, against what our PPO costs against the single-agent anchor (stable-baselines3)
+    Figure("fig_single_agent", (("ppo one agent", dict(algo="happo", env="mamujoco:HalfCheetah-1x6")),
+                                ("happo two legs", dict(algo="happo", env=HALFCHEETAH))),
+           common=dict(ppo_epochs=15), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
