@@ -1,6 +1,6 @@
 """The paper's claims and their verdicts, read from the runs on disk: per figure at several
 seed budgets (``table``), and every claim of Sections 6.1-6.3 and App. A at a glance
-(``glance``), which notebook 00 prints and the README carries (``python -m oapo_lite.claims``
+(``glance``, counted by ``summary``), which notebook 00 prints and the README carries (``python -m oapo_lite.claims``
 rewrites the README's copy; a test checks that it matches the data).
 
 A budget enters a table only when every run it needs is on disk; nothing is trained here
@@ -38,9 +38,10 @@ def table(figures: tuple[str, ...], budgets: tuple[str, ...] = SEED_BUDGETS) -> 
     return verdicts.claim_table(by_budget)
 
 
-def budget_share(figure, env: str | None, budget: str = "cpu") -> str:
-    """A claim's budget in words: steps x seeds, and its share of the paper's (the ``paper``
-    budget and whose steps those are; the mazes: ours, the paper gives none)."""
+def budget_share(figure, env: str | None, budget: str = "cpu", on_disk: int | None = None) -> str:
+    """A claim's budget in words: steps x seeds (``on_disk``: the fewest seeds of a curve on
+    disk, where fewer than the budget's), and its share of the paper's (the ``paper`` budget and
+    whose steps those are; the mazes: ours, the paper gives none)."""
     fig = grid.get_figure(figure)
     env = env or fig.common.get("env")
     if fig.envs(budget) is not None and env not in fig.envs(budget):
@@ -48,6 +49,8 @@ def budget_share(figure, env: str | None, budget: str = "cpu") -> str:
     b = fig.budget(budget, env)
     seeds = len(b.seeds) if fig.seeds is None else min(fig.seeds, len(b.seeds))
     run = f"{_steps(b.steps)} steps x {seeds} seed{'s' * (seeds > 1)}"
+    if on_disk is not None and on_disk < seeds:
+        run += f" ({on_disk} on disk)"
     if not fig.reference:
         return f"{run}; our budget, the paper gives none"
     paper = fig.budget("paper", env).steps
@@ -58,9 +61,10 @@ def _steps(n: int) -> str:
     return f"{n / 1e6:g}M" if n >= 1e6 else f"{n / 1e3:g}k"
 
 
-def _verdicts(fig: grid.Figure, budget: str, required: bool) -> list[verdicts.Verdict] | None:
-    """The claims' verdicts of ``fig`` at ``budget``; None where its runs are not all on disk and
-    the budget is not ``required`` (a ``required`` budget then raises, naming what is missing)."""
+def _verdicts(fig: grid.Figure, budget: str, required: bool) -> tuple[list[verdicts.Verdict], dict] | None:
+    """The claims' verdicts of ``fig`` at ``budget``, and per env (None for a figure on one) the
+    fewest seeds of a curve on disk; None where its runs are not all on disk and the budget is not
+    ``required`` (a ``required`` budget then raises, naming what is missing)."""
     if fig.runs_at is not None and budget not in fig.runs_at:
         if required:
             raise ValueError(f"{fig.id} has no runs at budget {budget!r}; it runs at {list(fig.runs_at)}")
@@ -74,24 +78,75 @@ def _verdicts(fig: grid.Figure, budget: str, required: bool) -> list[verdicts.Ve
             f"{experiments.run_path(missing[0].cfg, budget).parent} (first: "
             f"{', '.join(experiments.run_id(r.cfg) for r in missing[:3])}); train them with "
             f"`python -m oapo_lite reproduce --budget {budget} --figures {fig.id}`")
-    return verdicts.claims(fig, experiments.read_figure(fig.id, budget, skip_missing=True)[0])
+    df = experiments.read_figure(fig.id, budget, skip_missing=True)[0]
+    seeds = (df.groupby(["env" if fig.claims_per_env else "figure", "label"])["seed"].nunique()
+             .groupby(level=0).min().to_dict() if len(df) else {})
+    return verdicts.claims(fig, df), {(k if fig.claims_per_env else None): n for k, n in seeds.items()}
+
+
+NOT_RUN = "not run"  # a claim about an env with no run at this budget: no data, not a failed curve
+# what each status means, in one line (the README's list; the rule in full is ``verdicts.RULE``)
+MEANING = {
+    verdicts.REPRODUCED: "the whole 95% interval is on the paper's side",
+    verdicts.DIRECTION: "the point estimate is on the paper's side, the interval is not: within noise",
+    verdicts.NOT: "the point estimate is not on the paper's side",
+    verdicts.CONTRADICTED: "the whole 95% interval is on the other side",
+    verdicts.NOT_REUSE: "OAPPO / OATRPO hardly reused while it learned, so the claim says nothing about reuse",
+    verdicts.NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
+    NOT_RUN: "the env has no run at this budget (its `paper` budget is a cluster's job)",
+}
+SHORT = {verdicts.REPRODUCED: "held", verdicts.DIRECTION: "within noise", verdicts.NOT: "not held",
+         verdicts.CONTRADICTED: "contradicted", verdicts.NOT_REUSE: "not a test of reuse",
+         verdicts.NOT_TESTABLE: "not testable", NOT_RUN: "not run"}
+NO_RUN = "no run of this env on disk at this budget"  # ``verdicts._undecidable``'s reason
+
+
+def _status(v: verdicts.Verdict) -> str:
+    return NOT_RUN if v.status == verdicts.NOT_TESTABLE and v.reason == NO_RUN else v.status
 
 
 def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
-    """Every claim of the paper's experiments with its notebook, budget, verdict at the committed
-    budget (``cpu``: 5 seeds on the mazes) and at 20 seeds where those runs exist, and why.
-    Nothing is trained; a figure whose first-budget runs are missing raises naming them, and a
-    figure that declares its runs per env (``runs_at``) leaves a claim with no run not testable."""
+    """Every claim of the paper's experiments with its notebook, and its verdict, budget and
+    reason at the better-powered budget that has its runs (20 seeds on the mazes, where those
+    runs exist; else ``cpu``), then the ``cpu`` verdict and reason beside a 20-seed one. Claims
+    about an env with no run at all are grouped into one row per env. Nothing is trained; a
+    figure whose first-budget runs are missing raises naming them."""
     rows = []
     for fig in (f for f in grid.GRID if f.claims):
-        first, second = _verdicts(fig, budgets[0], required=True), _verdicts(fig, budgets[1], required=False)
+        (first, seeds), second = _verdicts(fig, budgets[0], required=True), _verdicts(fig, budgets[1], required=False)
+        seeds2 = {} if second is None else second[1]
+        unrun = {}
         for k, claim in enumerate(fig.claims):
             env = f"{fig.claims_per_env}{claim[0]}" if fig.claims_per_env else None
-            v, w = first[k], None if second is None else second[k]
-            rows.append({"section": fig.section, "claim": v.claim, "notebook": fig.notebook,
-                         "budget": budget_share(fig, env, budgets[0]), "verdict": v.status,
-                         "at 20 seeds": "-" if w is None else w.status, "why": (w or v).reason})
+            v, w = first[k], None if second is None else second[0][k]
+            if _status(v) == NOT_RUN:
+                unrun.setdefault(env, []).append(v.claim.split(": ", 1)[-1])
+                continue
+            lead, lead_budget = (w, budgets[1]) if w is not None else (v, budgets[0])
+            rows.append({"section": fig.section, "claim": v.claim, "notebook": fig.notebook, "verdict": _status(lead),
+                         "budget": budget_share(fig, env, lead_budget, (seeds2 if w is not None else seeds).get(env)),
+                         "why": lead.reason,
+                         "at 5 seeds": "-" if w is None else _status(v), "why at 5 seeds": "-" if w is None else v.reason})
+        for env, texts in unrun.items():
+            rows.append({"section": fig.section, "claim": f"{env.removeprefix(fig.claims_per_env or '')}: {len(texts)} "
+                                                         f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
+                         "notebook": fig.notebook, "verdict": NOT_RUN, "budget": budget_share(fig, env, budgets[0]),
+                         "why": NO_RUN, "at 5 seeds": "-", "why at 5 seeds": "-"})
     return pd.DataFrame(rows)
+
+
+def summary(df: pd.DataFrame) -> pd.DataFrame:
+    """``glance`` counted: per section, how many claims have each status (a grouped row of
+    claims without runs counts each of its claims)."""
+    claims_in = df["claim"].where(df["verdict"] == NOT_RUN).str.extract(r": (\d+) claims? \(", expand=False).astype(float).fillna(1).astype(int)
+    counts = pd.crosstab(df["section"], df["verdict"].map(SHORT), values=claims_in, aggfunc="sum").fillna(0).astype(int)
+    return counts.reindex(columns=[c for c in SHORT.values() if c in counts.columns])
+
+
+def summary_lines(df: pd.DataFrame) -> list[str]:
+    """``summary`` as one sentence per section."""
+    return [f"- Section {section}: " + ", ".join(f"{n} {status}" for status, n in row.items() if n) + "."
+            for section, row in summary(df).iterrows()]
 
 
 def markdown(df: pd.DataFrame) -> str:
@@ -108,9 +163,36 @@ def readme_block(path: Path = README) -> str:
     return text.split(BEGIN, 1)[1].split(END, 1)[0].strip()
 
 
+SECTIONS = {"6.1": "the mazes", "6.2": "SMAC on SMAX", "6.3": "Google Research Football", "App. A": "multi-agent MuJoCo"}
+
+
+def conclusion(df: pd.DataFrame) -> list[str]:
+    """What the reproduction found, one paragraph per section of ``glance``: each status with
+    the claims that have it, in the table's words."""
+    out = []
+    for section, part in df.groupby("section", sort=False):
+        n = int(summary(part).to_numpy().sum())
+        budgets = sorted(set(part.loc[part["verdict"] != NOT_RUN, "budget"]))
+        lines = [f"Section {section} ({SECTIONS.get(section, section)}), {n} claims"
+                 + (f", at {'; '.join(budgets)}" if len(budgets) == 1 else "") + ":"]
+        for status, short in SHORT.items():
+            these = part.loc[part["verdict"] == status, "claim"]
+            if len(these):
+                lines.append(f"{short}: {'; '.join(these)}.")
+        out.append(" ".join(lines))
+    return out
+
+
+def readme_markdown(df: pd.DataFrame) -> str:
+    """What the README carries between its markers: the summary, the statuses, the table."""
+    statuses = "\n".join(f"- *{status}*: {meaning}." for status, meaning in MEANING.items())
+    return "\n\n".join(["Summary (claims per section):", "\n".join(summary_lines(df)), "What the verdicts mean:", statuses,
+                        markdown(df)])
+
+
 def write_readme(path: Path = README) -> None:
-    """Replace the README's claims table with the one the data gives."""
-    text, block = path.read_text(), markdown(glance())
+    """Replace the README's claims table (and its summary) with what the data gives."""
+    text, block = path.read_text(), readme_markdown(glance())
     head, rest = text.split(BEGIN, 1)
     path.write_text(f"{head}{BEGIN}\n{block}\n{END}{rest.split(END, 1)[1]}")
 

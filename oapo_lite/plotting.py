@@ -4,6 +4,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import FuncFormatter
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
 YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arrival rewards)",
@@ -14,14 +15,20 @@ YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arri
 ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
                "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
                "oappo adaptive": "#145214", "oappo warm-up 10": "#98df8a"}
+# Fig. 5b's reuse schemes: no reuse is HAPPO's scheme and everyone-shares MAPPO's, so they echo them
+SCHEME_COLORS = {"NR": ALGO_COLORS["happo"], "AR": ALGO_COLORS["mappo"], "UR": "#e377c2", "RR": "#17becf"}
 AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
+# env steps in thousands or millions, never matplotlib's "1e6" offset
+STEPS = FuncFormatter(lambda x, _: f"{x / 1e6:g}M" if abs(x) >= 1e6 else f"{x / 1e3:g}k" if x else "0")
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
 
 
 def color_of(label, order=None):
     """The colour of a curve: its algorithm's (the label, or its first word, any case: "OAPPO",
-    "oappo lambda=0.4"; the adaptive rule has its own), else the label's place in ``order`` on a
+    "oappo lambda=0.4"; the adaptive rule has its own) or reuse scheme's, else the label's place in ``order`` on a
     sequential map (a sigma, a lambda, a reuse scheme), else None (matplotlib's next colour)."""
+    if label in SCHEME_COLORS:
+        return SCHEME_COLORS[label]
     name = str(label).lower()
     for key in (name, name.split()[0] if name.strip() else ""):
         if key in ALGO_COLORS:
@@ -34,45 +41,56 @@ def color_of(label, order=None):
 
 def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None,
                     colors: dict | None = None):
-    """Fig. 3b-d, 4, App. A: every seed as a thin line and the interquartile mean over seeds
-    (bold) of ``y`` against env steps. Per-seed lines rather than mean +- std: outcomes that
-    split into trapped and optimal seeds have a mean that describes no run and a band that
-    leaves the possible range. The title gets a line saying so. ``colors``: label -> colour,
-    where a figure needs its own (else ``color_of``)."""
-    from oapo_lite.verdicts import iqm
-
+    """Fig. 3b-d, 4, App. A: every seed as a thin line (on top) and, bold, the median over seeds
+    of ``y`` against env steps (the lower middle seed where the count is even, so at every step
+    a level some seed reached). Not mean +- std, nor an IQM: outcomes that split into trapped
+    and optimal seeds have a mean that describes no run and a band that leaves the possible
+    range. The title gets a line saying so. ``colors``: label -> colour, where a figure needs
+    its own (else ``color_of``)."""
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
-    for label in order:
+    seeds_of = {}
+    for label in order:  # the bold IQMs first, every curve's seeds on top: no seed hides under another curve
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)
         color = (colors or {}).get(label) or color_of(label, order)
-        line, = ax.plot(runs.index, iqm(runs.to_numpy(float), axis=1), lw=2.2, label=str(label), color=color)
-        ax.plot(runs.index, runs.to_numpy(float), lw=0.6, alpha=0.35, color=line.get_color())
+        median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
+        line, = ax.plot(runs.index, median, lw=2.2, label=str(label), color=color, zorder=2)
+        seeds_of[label] = (runs, line.get_color())
+    for runs, color in seeds_of.values():
+        ax.plot(runs.index, runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3)
+    ax.xaxis.set_major_formatter(STEPS)
     if y == "frac_opt":
         ax.axhline(1.0, color="grey", ls="--", lw=1)
     seeds = df.groupby("label")["seed"].nunique()
-    note = f"bold: IQM over {'/'.join(map(str, sorted(set(seeds))))} seeds; thin: each seed"
+    note = f"bold: the median of {'/'.join(map(str, sorted(set(seeds))))} seeds; thin: each seed"
     ax.set(xlabel="environment steps", ylabel=ylabel or YLABELS.get(y, y),
            title=f"{title}\n{note}" if title else note)
     ax.legend(frameon=False)
     return ax
 
 
-def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
-    """Fig. 5b: final fraction of the optimum per label: the IQM over seeds as a bar, every seed
-    as a dot (trapped and optimal seeds stay visible; no std band beyond the optimum)."""
-    from oapo_lite.verdicts import iqm
+def sweep_colors(labels, default) -> dict:
+    """Colours for a sweep of one OAPPO setting (Fig. 3c's sigma, 3d's lambda): the paper's
+    default keeps OAPPO's colour, the other values a sequential map without green."""
+    others = [x for x in labels if x != default]
+    return {default: ALGO_COLORS["oappo"]} | {x: plt.cm.plasma(0.55 * k / max(len(others) - 1, 1))
+                                              for k, x in enumerate(others)}
 
+
+def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
+    """Fig. 5b: final fraction of the optimum per label: every seed as a dot, and the median run's
+    level as a bar (the lower middle run where the count is even: a level some run reached; a
+    mean or IQM of trapped and optimal seeds describes no run)."""
     ax = ax or plt.subplots(figsize=(5, 4))[1]
     order = order if order is not None else list(dict.fromkeys(runs["label"]))
     finals = [runs.loc[runs["label"] == o, "final"].to_numpy(float) for o in order]
     colors = [color_of(o, order) for o in order]
-    ax.bar([str(o) for o in order], [iqm(f) for f in finals], color=colors, alpha=0.6)
+    ax.bar([str(o) for o in order], [np.quantile(f, 0.5, method="lower") for f in finals], color=colors, alpha=0.5)
     for k, f in enumerate(finals):
         ax.plot(np.full(len(f), k) + np.linspace(-0.15, 0.15, len(f)), f, "o", ms=4, color="black")
     ax.axhline(1.0, color="grey", ls="--", lw=1)
     low = min(0.0, min(f.min() for f in finals) - 0.1)
-    note = f"bar: IQM over seeds; dots: each of {max(len(f) for f in finals)} seeds"
+    note = f"bar: the median run; dots: each of {max(len(f) for f in finals)} seeds"
     ax.set(ylabel="final return / oracle optimum", title=f"{title}\n{note}" if title else note, ylim=(low, 1.1))
     return ax
 

@@ -19,19 +19,18 @@ bootstrap with one stratum per curve). With one seed there is no interval (NaN).
 The decision rule (``RULE``, printed where the verdicts are introduced) reads, in order:
 
 1. *not testable at this budget* when the data cannot decide: fewer than two seeds of a
-   curve; a curve that did not learn (below); for "faster", no seed of either curve reaching
-   the threshold;
+   curve; a curve that did not learn (below); for "faster" and "as reliably", no seed of either
+   curve reaching the threshold;
 2. a pairwise claim "a beats b" is *reproduced* when the whole 95% interval of P(a better
    than b) lies above 0.5, *contradicted* when it lies below 0.5, *direction only* when only
    the point estimate is above 0.5, *not reproduced* otherwise; "a stays below the threshold"
    (``stuck``) and "a reaches it" (``optimal``) read the interval of a's final IQM the same way;
-3. "faster" is *not reproduced* whenever fewer seeds of a than of b reached the threshold,
-   whatever P says: a seed that never got there is not evidence of speed, and the reason is
-   printed with the verdict.
+3. "faster" reads the steps to the threshold alone (a seed that never got there counts at the
+   budget, behind every seed that did); "as reliably" (``reliable``) reads the share of seeds
+   that got there, a's minus b's, against 0;
 4. (checked right after step 1) a claim that OAPPO or OATRPO beats another algorithm is
-   *not a test of reuse* when that
-   curve hardly reused while it learned (``REUSE_PART``); the status says so and when the gate
-   last opened (the interval is kept as evidence).
+   *not a test of reuse* when that curve hardly reused while it learned (``REUSE_PART``); the
+   status says so and when the gate last opened (the interval is kept as evidence).
 
 A curve *learned* at a budget when its runs' final level exceeds their initial level (the
 mean of the first evaluations, the untrained policy) by more than twice the standard error
@@ -65,7 +64,7 @@ CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
 SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
 # per-run numbers a verdict reads; "steps" and "drawdown" are better when lower
-RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawdown"}
+RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawdown", "reached": "reached"}
 
 
 @dataclass(frozen=True)
@@ -332,17 +331,18 @@ RULE = f"""How a verdict is decided (oapo_lite.verdicts), in this order:
 1. Not testable at this budget: a curve has fewer than 2 seeds, or did not learn (its final
    level is not above its initial level by more than {LEARN_SE:g} standard errors of the gain over
    seeds, or ends at or below the metric's floor: a 5% win rate or score), or, for "faster",
-   no seed of either curve reached the threshold.
+   no seed of either curve reached the threshold (for "faster" and "as reliably").
 2. Not a test of reuse: a claim that a curve reusing by Eq. 9 (OAPPO, OATRPO) beats a curve of
    another algorithm, where that curve gave some peer's experience a positive weight at fewer
    than {REUSE_PART:.0%} of its evaluated iterations while it learned (up to its first reaching the
    threshold; all of them if it never did), mean over seeds; it says when the gate last opened.
 3. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
-   P(a better than b) (or of the final IQM, for "stays below" / "reaches") is on the claimed
-   side of 0.5 (of the threshold), contradicted when it is wholly on the other side,
-   direction only when just the point estimate is on the claimed side, not reproduced otherwise.
-4. "Faster" is not reproduced whenever fewer seeds of the faster-claimed curve reached the
-   threshold, whatever P says; the verdict then names the counts."""
+   P(a better than b) (or of the final IQM, for "stays below" / "reaches"; of the share of seeds
+   that reached the threshold minus the other curve's, for "as reliably") is on the claimed
+   side of 0.5 (of the threshold; of 0, a tie included), contradicted when it is wholly on the
+   other side, direction only when just the point estimate is on the claimed side,
+   not reproduced otherwise. "Faster" reads the steps to the threshold alone: a seed that never
+   got there counts at the budget, behind every seed that did."""
 
 
 @dataclass(frozen=True)
@@ -381,27 +381,38 @@ def _reason(status: str, estimate: str, side: str, value: float) -> str:
     return f"{estimate}: {where[status]}"
 
 
-def _pairwise(ev: Evidence, a, b, stat: str, claim: str, evidence: str, veto: str = "") -> Verdict:
+def _pairwise(ev: Evidence, a, b, stat: str, claim: str, evidence: str) -> Verdict:
     p = ev.improvement(a, b, stat)
     word = {"steps": "faster", "final": "higher", "drawdown": "steadier"}[stat]
     estimate = f"P({a} {word}) {p.fmt()}"
-    if veto:
-        return Verdict(claim, NOT, f"{evidence}; P({a} {word}) = {p.fmt()}.", estimate, veto)
     status = _side(p, 0.5, True)
     return Verdict(claim, status, f"{evidence}; P({a} {word}) = {p.fmt()}.", estimate,
                    _reason(status, estimate, "above 0.5", 0.5))
 
 
 def faster(ev: Evidence, a, b, claim: str) -> Verdict:
-    """Claim: ``a`` reaches the threshold in fewer env steps than ``b``."""
-    s, reach = ev.summary, ev.metric.reach.format(ev.threshold)
-    veto = ""
-    if s.loc[a, "reached"] < s.loc[b, "reached"]:
-        veto = (f"fewer seeds of {a} reached {reach} ({s.loc[a, 'reached']}/{s.loc[a, 'seeds']} vs "
-                f"{s.loc[b, 'reached']}/{s.loc[b, 'seeds']}), so P(faster) cannot count")
+    """Claim: ``a`` reaches the threshold in fewer env steps than ``b``. A seed that never got
+    there counts at its last step, so it ranks behind every seed that did: whether ``a`` gets
+    there as often is ``reliable``'s question, not this one's."""
+    reach = ev.metric.reach.format(ev.threshold)
     return _pairwise(ev, a, b, "steps", claim,
-                     evidence=f"steps to {reach}, IQM [95% CI] over seeds: {_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}",
-                     veto=veto)
+                     evidence=f"steps to {reach}, IQM [95% CI] over seeds: {_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}")
+
+
+def _share_difference(x, y, axis: int = -1):
+    return np.mean(x, axis=axis) - np.mean(y, axis=axis)
+
+
+def reliable(ev: Evidence, a, b, claim: str) -> Verdict:
+    """Claim: ``a`` reaches the threshold at least as often as ``b``: the share of ``a``'s seeds
+    that reached it minus ``b``'s, with its 95% interval, read against 0 (a tie holds)."""
+    s, reach = ev.summary, ev.metric.reach.format(ev.threshold)
+    d = bootstrap_interval(_share_difference, ev.values(a, "reached"), ev.values(b, "reached"))
+    status = (REPRODUCED if d.low >= 0 else CONTRADICTED if d.high < 0 else DIRECTION if d.point >= 0 else NOT)
+    estimate = f"share reached, {a} minus {b}: {d.fmt()}"
+    return Verdict(claim, status, f"seeds that reached {reach}: {a} {s.loc[a, 'reached']}/{s.loc[a, 'seeds']} vs {b} "
+                                  f"{s.loc[b, 'reached']}/{s.loc[b, 'seeds']}; difference of shares {d.fmt()}.",
+                   estimate, _reason(status, estimate, "at or above 0", 0))
 
 
 def higher(ev: Evidence, a, b, claim: str) -> Verdict:
@@ -499,7 +510,7 @@ def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     idle = [why_not_learned(ev, x) for x in labels if not learned(ev, x)]
     if idle:
         return "; ".join(idle)
-    if test is faster and not s.loc[list(labels), "reached"].any():
+    if test in (faster, reliable) and not s.loc[list(labels), "reached"].any():
         return f"no seed of {' or '.join(map(str, labels))} reached {m.reach.format(m.threshold)}"
     return None
 

@@ -27,9 +27,9 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
 
 def test_the_readme_carries_the_claims_table_the_data_gives():
     """The README's copy of the claims table is what the committed runs give today."""
-    block = claims.readme_block()
-    assert block == claims.markdown(claims.glance()), "the README's claims table is stale: run python -m oapo_lite.claims"
-    assert block.count("\n") == sum(len(f.claims) for f in grid.GRID) + 1  # a header, a rule, a row per claim
+    block, table = claims.readme_block(), claims.glance()
+    assert block == claims.readme_markdown(table), "the README's claims table is stale: run python -m oapo_lite.claims"
+    assert block.endswith(claims.markdown(table)) and len(claims.MEANING) == len(set(claims.SHORT.values()))
 
 
 def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
@@ -75,3 +75,40 @@ def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["lr", "entropy_coef", "clip"]].iloc[0])
             for label, f in chosen["family"].items()} == grid.SWEEP_CHOSEN
+
+
+# the condition each status's reason states (``verdicts._reason``, ``faster``'s veto, ``_undecidable``,
+# ``reuse_gap``), so that a row can be checked to give the reason of its own status and no other's
+REASONS = {
+    verdicts.REPRODUCED: r": wholly (above|below|at or above) ", verdicts.CONTRADICTED: r": wholly on the other side of ",
+    verdicts.DIRECTION: r": point estimate [^;]*, interval across ", verdicts.NOT: r": point estimate not ",
+    verdicts.NOT_REUSE: r"reused at \d+% of its evaluated iterations .* below \d+%$",
+    verdicts.NOT_TESTABLE: r"(did not learn|fewer than 2 seeds on disk|^no seed of .* reached)", claims.NOT_RUN: claims.NO_RUN,
+}
+
+
+def test_every_row_of_the_glance_gives_the_reason_of_its_own_status_and_no_other():
+    import re
+
+    table = claims.glance()
+    pairs = list(zip(table["verdict"], table["why"])) + [
+        (v, why) for v, why in zip(table["at 5 seeds"], table["why at 5 seeds"]) if v != "-"]
+    for status, why in pairs:
+        assert re.search(REASONS[status], why), (status, why)
+        assert not [s for s, pattern in REASONS.items() if s != status and re.search(pattern, why)], (status, why)
+    # the summary counts every claim once, a row of claims without runs as its claims
+    assert claims.summary(table).to_numpy().sum() == sum(len(f.claims) for f in grid.GRID if f.claims)
+
+
+def test_the_conclusion_names_every_claim_once_under_its_status():
+    import re
+
+    table = claims.glance()
+    labels = "|".join(sorted(map(re.escape, claims.SHORT.values()), key=len, reverse=True))
+    under = {}  # (section, status) -> the text the paragraph gives under it
+    for section, text in zip(table["section"].unique(), claims.conclusion(table)):
+        parts = re.split(rf"(?:^|(?<=[.:]) )({labels}): ", text)
+        under |= {(section, status): body for status, body in zip(parts[1::2], parts[2::2])}
+    for section, claim, status in zip(table["section"], table["claim"], table["verdict"]):
+        assert claim in under[section, claims.SHORT[status]], (section, status, claim)
+    assert sum(text.count("; ") + 1 for text in under.values()) >= len(table)

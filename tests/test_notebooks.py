@@ -10,7 +10,7 @@ import nbformat
 import pytest
 import torch
 
-from oapo_lite import quoted
+from oapo_lite import grid, quoted
 
 import numeric_paths
 
@@ -96,3 +96,48 @@ def test_a_path_sets_its_variables_and_clears_the_others(monkeypatch):
     assert "MKL_CBWR" not in numeric_paths.environment("default")
     env = numeric_paths.environment("avx2")
     assert env["ATEN_CPU_CAPABILITY"] == "avx2" and "MKL_CBWR" not in env and env["PATH"] == os.environ["PATH"]
+
+
+def typed_budget_errors(notebook: Path) -> list[str]:
+    """The seed counts and budget shares that the markdown of an empirical notebook states and
+    the data contradict: "N seeds" where no curve of its figures has N seeds on disk (nor is N
+    the paper's count), and "X% of HARL's YM" that is no env's share of a figure's steps."""
+    import re
+
+    from oapo_lite import experiments
+
+    figures = [f for f in grid.GRID if f.notebook == notebook.stem]
+    seeds, shares = set(), set()
+    for fig in figures:
+        for budget in ("cpu", "paper20"):
+            if fig.runs_at is not None and budget not in fig.runs_at:
+                continue
+            df = experiments.read_figure(fig.id, budget, skip_missing=True)[0]
+            if len(df):
+                seeds |= set(df.groupby(["env", "label"] if "env" in df else ["label"])["seed"].nunique())
+            for env in fig.envs(budget) or [None]:
+                seeds.add(len(fig.budget("paper", env).seeds))  # the paper's own count
+                steps, paper = fig.budget(budget, env).steps, fig.budget("paper", env).steps
+                shares.add((f"{100 * steps / paper:.2g}", f"{paper / 1e6:g}"))
+    errors = []
+    for cell in nbformat.read(notebook, as_version=4).cells:
+        if cell.cell_type != "markdown":
+            continue
+        errors += [f"{m.group(0)} (on disk: {sorted(seeds)})" for m in re.finditer(r"\b(\d+) seeds\b", cell.source)
+                   if int(m.group(1)) not in seeds]
+        errors += [f"{m.group(0)} (the figures' shares: {sorted(shares)})"
+                   for m in re.finditer(r"\b(\d+(?:\.\d+)?)% of (?:HARL's )?(\d+(?:\.\d+)?)M\b", cell.source)
+                   if (f"{float(m.group(1)):.2g}", f"{float(m.group(2)):g}") not in shares]
+    return errors
+
+
+@pytest.mark.parametrize("notebook", sorted({f.notebook for f in grid.GRID if f.notebook}))
+def test_no_empirical_notebook_types_a_seed_count_or_share_that_the_data_contradict(notebook):
+    assert typed_budget_errors(NOTEBOOKS[0].parent / f"{notebook}.ipynb") == []
+
+
+def test_a_typed_seed_count_the_data_contradict_is_found(tmp_path):
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("trained with 7 seeds, 3% of HARL's 25M steps")])
+    path = tmp_path / "22_grf_fig6b.ipynb"
+    nbformat.write(nb, path)
+    assert [e.split(" (")[0] for e in typed_budget_errors(path)] == ["7 seeds", "3% of HARL's 25M"]

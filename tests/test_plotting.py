@@ -56,3 +56,28 @@ def test_episode_animation_rejects_a_trajectory_of_the_wrong_shape():
         plotting.episode_animation(maze, {"A": [[maze.starts[0]]]})
     with pytest.raises(ValueError, match="at least one"):
         plotting.episode_animation(maze, {})
+
+
+def test_split_outcomes_are_drawn_by_a_level_some_seed_reached_with_every_seed_on_top():
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    # three seeds trapped at -0.03, two at 0.98: an IQM (0.30) or a mean (0.37) describes no run
+    levels = {0: -0.03, 1: -0.03, 2: -0.03, 3: 0.98, 4: 0.98}
+    df = pd.DataFrame([dict(label="AR", seed=s, step=t, frac_opt=level * t / 2) for s, level in levels.items()
+                       for t in (0, 1, 2)])
+    ax = plotting.learning_curves(df, ["AR"])
+    bold, *seeds = ax.get_lines()[:6]
+    assert list(bold.get_ydata()) == [0.0, -0.015, -0.03]  # the median seed, step by step
+    assert all(line.get_zorder() > bold.get_zorder() for line in seeds)
+    assert plotting.color_of("AR") == plotting.ALGO_COLORS["mappo"] and plotting.color_of("NR") == plotting.ALGO_COLORS["happo"]
+    bars = plotting.final_bars(pd.DataFrame(dict(label="AR", seed=list(levels), final=list(levels.values()))))
+    assert [b.get_height() for b in bars.patches] == [-0.03]
+    even = pd.DataFrame(dict(label="x", seed=range(4), final=[0.0, 0.0, 1.0, 1.0]))
+    assert [b.get_height() for b in plotting.final_bars(even).patches] == [0.0]  # the lower middle run, not 0.5
+    plt.close("all")
+
+
+def test_a_sweep_keeps_the_papers_default_in_oappos_colour():
+    colors = plotting.sweep_colors(["0.01", "0.1", "1", "10"], "0.1")
+    assert colors["0.1"] == plotting.ALGO_COLORS["oappo"] and len({str(c) for c in colors.values()}) == 4

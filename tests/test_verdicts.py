@@ -185,7 +185,7 @@ def test_one_seed_is_never_more_than_direction():
     assert verdict.status == v.DIRECTION
 
 
-def test_censored_seeds_never_make_a_run_faster():
+def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
     # a: 3 seeds converge at 20k, 2 never do; b: every seed converges, later.
     a = curves({"a": (20_000, 1.0)}, seeds=3)
     a_stuck = curves({"a": (20_000, 0.5)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)
@@ -193,10 +193,21 @@ def test_censored_seeds_never_make_a_run_faster():
     ev = v.Evidence(pd.concat([a, a_stuck, b]))
     s = ev.summary
     assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
+    # a censored seed ranks behind every seed that got there: P = (3 x 5 wins) / 25 pairs
     verdict = v.faster(ev, "a", "b", "a faster")
-    assert verdict.status == v.NOT
-    # the reason is on the verdict's line, beside the P it overrides
-    assert "fewer seeds of a reached 95% of the optimum (3/5 vs 5/5)" in verdict.sentence()
+    assert verdict.estimate.startswith("P(a faster) 0.600 ") and verdict.status == v.DIRECTION
+    assert "3/5 seeds reached" in verdict.evidence
+    # "as reliably": 3/5 against 5/5, a difference of -0.4 whose interval reaches 0 (a resample of
+    # a's seeds can draw only its converged ones): not reproduced; a tie holds
+    late = v.reliable(ev, "a", "b", "a as reliably as b")
+    assert late.status == v.NOT and late.estimate.startswith("share reached, a minus b: -0.400 [")
+    assert v.reliable(ev, "b", "b", "b as reliably as b").status == v.REPRODUCED
+    # never reaching against always reaching: the whole interval below 0
+    never = pd.concat([curves({"a": (20_000, 0.5)}, seeds=8), curves({"b": (70_000, 1.0)}, seeds=8)])
+    assert v.reliable(v.Evidence(never), "a", "b", "x").status == v.CONTRADICTED
+    # with no seed of either curve there, neither question can be asked
+    nowhere = curves({"a": (20_000, 0.5), "b": (20_000, 0.6)})
+    assert v.check(v.Evidence(nowhere), v.reliable, ("a", "b"), "x").status == v.NOT_TESTABLE
 
 
 def test_unknown_figure_raises():
@@ -325,9 +336,9 @@ def test_two_learned_curves_with_p_above_one_half_are_reproduced():
     assert verdict.status == v.REPRODUCED and verdict.reason.endswith("wholly above 0.5")
 
 
-def test_the_printed_rule_names_every_status_and_the_veto():
+def test_the_printed_rule_names_every_status():
     for word in ("Not testable", "did not learn", "reproduced", "contradicted", "direction only",
-                 "not reproduced", "fewer seeds", "Not a test of reuse", "25%"):
+                 "not reproduced", "as reliably", "Not a test of reuse", "25%"):
         assert word in v.RULE
 
 
