@@ -141,3 +141,21 @@ def test_a_typed_seed_count_the_data_contradict_is_found(tmp_path):
     path = tmp_path / "22_grf_fig6b.ipynb"
     nbformat.write(nb, path)
     assert [e.split(" (")[0] for e in typed_budget_errors(path)] == ["7 seeds", "3% of HARL's 25M"]
+
+
+def test_every_exercise_keeps_its_answer_folded_until_unfolded():
+    """An exercise's prompt states no answer, and its solution (the next code cell) is folded,
+    code and output, in JupyterLab (``jupyter`` metadata) and in the book (``hide-cell``)."""
+    found = 0
+    for path in NOTEBOOKS:
+        cells = nbformat.read(path, as_version=4).cells
+        for i, cell in enumerate(cells):
+            if cell.cell_type != "markdown" or not cell.source.startswith("**Exercise"):
+                continue
+            found += 1
+            assert "Expect" not in cell.source, (path.name, i)
+            solution = next(c for c in cells[i + 1:] if c.cell_type == "code")
+            assert solution.source.startswith("# Solution"), (path.name, i)
+            assert solution.metadata.get("jupyter") == {"source_hidden": True, "outputs_hidden": True}, (path.name, i)
+            assert "hide-cell" in solution.metadata.get("tags", []), (path.name, i)
+    assert found >= 15
