@@ -133,11 +133,18 @@ SMAX_TUNED = dict(lr=2e-3, critic_lr=2e-3, ppo_epochs=4, n_minibatch=4, entropy_
 SMAX_ANCHOR = {"3m": (295_000, 0.72), "2s3z": (500_000, 0.97)}
 # the small maps first (they learn within a CPU budget), then the paper's
 SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+# the paper's heterogeneous maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is
+# heterogeneous too and small enough to learn on a CPU
+SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 
 
-# App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO) and
-# direct reuse (SEAC) on homogeneous agents.
-FIGA_ALGOS = ("happo", "mappo", "oappo", "seac")
+# App. A on multi-agent MuJoCo: no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO, per
+# agent with the engines' mean gate, and one net seat by seat; per kind is per agent here, every
+# leg being its own kind) and direct reuse (SEAC) on homogeneous agents. The PPO family runs 15
+# epochs, HARL's setting that helped most in our loop (``fig_mamujoco_settings``, ASSUMPTIONS.md).
+FIGA_CURVES = {"happo": dict(algo="happo"), "mappo": dict(algo="mappo"), "oappo": dict(algo="oappo", kl_reduce="mean"),
+               "oappo one seat": dict(algo="oappo", networks="one", update_by="seat"), "seac": dict(algo="seac")}
+FIGA_ALGOS = tuple(FIGA_CURVES)
 HALFCHEETAH = "mamujoco:HalfCheetah-2x3"
 # the cpu batch on HalfCheetah: 8 copies x 250 steps, MuJoCo's 1,000-step episodes
 MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)
@@ -167,10 +174,25 @@ def _reading_curves(env: str) -> tuple:
 # before the runs: per family, the setting with the highest final win rate (mean over seeds of
 # the last fifth of the evaluations); settings within 0.02 of it tie, and the tie goes to the
 # fewest env steps to a 50% win rate (IQM over seeds).
-SWEEP_FAMILIES = (("happo", dict(algo="happo")), ("mappo", dict(algo="mappo")),
-                  ("oappo type", dict(algo="oappo", networks="type", kl_reduce="mean")),
-                  ("oappo one seat", dict(algo="oappo", networks="one", update_by="seat")))
+SWEEP_FAMILIES = {"happo": dict(algo="happo"), "mappo": dict(algo="mappo"),
+                  "oappo type": dict(algo="oappo", networks="type", kl_reduce="mean"),
+                  "oappo one seat": dict(algo="oappo", networks="one", update_by="seat")}
 SWEEP_LRS, SWEEP_ENTROPIES = (5e-4, 1e-3, 2e-3), (0.0, 0.01)
+# what the rule chose per family, as (lr, entropy) (ASSUMPTIONS.md; a test re-derives it from the
+# committed runs)
+# then the PPO clip at each family's best (lr, entropy), the same rule over all its settings
+SWEEP_CLIPS = (0.1, 0.05)
+SWEEP_CHOSEN = {"happo": (2e-3, 0.01, 0.2), "mappo": (2e-3, 0.0, 0.2), "oappo type": (2e-3, 0.0, 0.2),
+                "oappo one seat": (5e-4, 0.0, 0.2)}
+
+
+def _swept(lr: float, entropy: float, clip: float = TrainConfig.clip) -> dict:
+    return dict(lr=lr, critic_lr=lr, entropy_coef=entropy, clip=clip)
+
+
+def tuned(family: str) -> dict:
+    """A family's curve at its chosen setting, on top of ``SMAX_TUNED``."""
+    return dict(SWEEP_FAMILIES[family], **_swept(*SWEEP_CHOSEN[family]))
 
 
 # Issue 32: SEAC and SePS with settings of their own on SMAX (at their reference code's A2C
@@ -179,6 +201,51 @@ SWEEP_LRS, SWEEP_ENTROPIES = (5e-4, 1e-3, 2e-3), (0.0, 0.01)
 # (the sweep's rule), and Fig. 4 then shows whether it leaves the floor on 2s3z too.
 A2C_LRS, A2C_ENTROPIES = (3e-4, 1e-3, 3e-3), (0.01, 0.05)
 A2C_CHOSEN = {"seac": (3e-3, 0.01), "seps": (3e-3, 0.01)}  # (a2c_lr, entropy): what the rule chose (ASSUMPTIONS.md)
+
+
+# Issue 32's Fig. 4: every family at its sweep's choice. OAPPO under each reading of issue 31
+# that trains differently on the map (one net per kind only where kinds differ: with one kind it
+# is MAPPO): per agent with the engines' gate statistic (the mean) at the separate-network
+# family's setting, per kind, and one net seat by seat. OATRPO gates with the mean too (TRPO has
+# no learning rate or entropy bonus to tune). SEAC / SePS at their 3m sweep's choice.
+SMAX_READINGS = {"oappo": "OAPPO (a net per agent)", "oappo type": "OAPPO (a net per kind)",
+                 "oappo one seat": "OAPPO (one net, seat by seat)"}
+# the long maps at 3M+ steps: MAPPO, HAPPO and the reading the sweep found best (per kind and seat
+# by seat tie on 2s3z, at 0.956 / 0.946 and 192k steps to 0.5; per kind is the one whose gate acts)
+LONG_SMAX_CURVES = ("mappo", "happo", "oappo type")
+
+
+def smax_curves(m: str) -> tuple:
+    """Fig. 4's curves on map ``m``: (label, TrainConfig fields)."""
+    curves = {"mappo": tuned("mappo"), "happo": tuned("happo"),
+              "oappo": dict(tuned("happo"), algo="oappo", kl_reduce="mean"),
+              "oappo type": tuned("oappo type"), "oappo one seat": tuned("oappo one seat"),
+              "oatrpo": dict(algo="oatrpo", kl_reduce="mean"),
+              **{a: dict(algo=a, a2c_lr=lr, entropy_coef=ent) for a, (lr, ent) in A2C_CHOSEN.items()}}
+    if m not in SMAX_HETEROGENEOUS:
+        del curves["oappo type"]
+    keep = LONG_SMAX_CURVES if m in SMAX_MAPS[3:] else curves
+    return tuple((label, dict(kw, env=f"smax:{m}")) for label, kw in curves.items() if label in keep)
+
+
+def _smax_claims(m: str) -> list:
+    """The paper's Section 6.2 claims on map ``m``, for each reading of OAPPO it has."""
+    out = []
+    for r in (label for label, _ in smax_curves(m) if label in SMAX_READINGS):
+        name = SMAX_READINGS[r]
+        if m in SMAX_HETEROGENEOUS:
+            out += [(m, higher, (r, other), f"{m}: {name} ends above {other.upper()} (heterogeneous agents)")
+                    for other in ("mappo", "happo")]
+        if m == "6h_vs_8z":
+            out += [(m, stabler, (r, "mappo"), f"{m}: {name} improves more stably than MAPPO"),
+                    (m, higher, (r, "mappo"), f"{m}: {name} ends above MAPPO")]
+        out.append((m, faster, (r, "happo"), f"{m}: {name} converges faster than HAPPO"))
+    return out
+
+
+FIGA_READINGS = {r: SMAX_READINGS[r] for r in FIGA_CURVES if r in SMAX_READINGS}
+
+
 
 
 # Issue 32: HARL's tuned HalfCheetah 2x3 HAPPO settings tried in our loop one at a time, then
@@ -198,16 +265,8 @@ ENGINE_BUDGETS = ("smoke", "cpu", "paper")
 # defaults, with the other values of the sweeps)
 SIGMA_REASONS = ("own experience only is slower", "irrelevant experience confuses", "all peers' experience hinders")
 LAM_02, LAM_04, LAM_07, LAM_1 = LAMBDAS
-# Section 6.2 (Fig. 4) on SMAX, per map. The paper's heterogeneous maps are 3s5z_vs_3s6z and MMM2
-# (here its stand-in); 2s3z is heterogeneous too and small enough to learn on a CPU.
-SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
-SMAX_CLAIMS = sorted([
-    *((m, higher, ("oappo", other), f"{m}: OAPPO ends above {other.upper()} (heterogeneous agents)")
-      for m in SMAX_HETEROGENEOUS for other in ("mappo", "happo")),
-    ("6h_vs_8z", stabler, ("oappo", "mappo"), "6h_vs_8z: OAPPO improves more stably than MAPPO"),
-    ("6h_vs_8z", higher, ("oappo", "mappo"), "6h_vs_8z: OAPPO ends above MAPPO"),
-    *((m, faster, ("oappo", "happo"), f"{m}: OAPPO converges faster than HAPPO") for m in SMAX_MAPS),
-], key=lambda c: SMAX_MAPS.index(c[0]))  # map by map (a stable sort keeps each map's order)
+# Section 6.2 (Fig. 4) on SMAX, per map and reading of OAPPO
+SMAX_CLAIMS = [c for m in SMAX_MAPS for c in _smax_claims(m)]
 # Section 6.3 (Fig. 6b) on GRF, per scenario: individual experience suffices on the two simple
 # tasks (HAPPO, own experience only, nearly perfect); OAPPO and OATRPO are best on the
 # counterattacks (each ends above every other algorithm of the table).
@@ -275,17 +334,18 @@ GRID = (
     Figure("fig_entropy_weight", (("oappo", dict(algo="oappo")),
                                   ("oappo entropy x W[i,i]", dict(algo="oappo", entropy_by_weight=True))),
            common=dict(env="black_red"), notebook="17_adaptive_reuse"),
-    # label: the algorithm; the map is the ``env`` column. ``cpu`` is what fits about 3 hours on 2
-    # cores: the small maps at 5 seeds, the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) and
-    # 3s5z_vs_3s6z (1M, 5%; JaxMARL's MAPPO first wins there at about 500k) at 3 seeds
-    # (ASSUMPTIONS.md); the MMM2 stand-in and the paper's steps run at ``paper``.
-    Figure("fig4_smax", tuple((a, dict(algo=a, env=f"smax:{m}")) for m in SMAX_MAPS for a in SMAX_ALGOS),
+    # label: the algorithm or reading (``smax_curves``); the map is the ``env`` column. ``cpu``:
+    # the small maps and the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) at 5 seeds;
+    # 3s5z_vs_3s6z at 3M (15%; the separate nets learn 2.6-3.1x slower than MAPPO, which first
+    # wins there at about 500k) for its three curves at 3 seeds (ASSUMPTIONS.md); the MMM2 stand-in
+    # and the paper's steps run at ``paper``.
+    Figure("fig4_smax", tuple(c for m in SMAX_MAPS for c in smax_curves(m)),
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
                "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
                                                    "smax:2s3z": dict(steps=500_000, eval_every=10),
-                                                   "smax:6h_vs_8z": dict(steps=500_000, eval_every=10, seeds=(0, 1, 2)),
-                                                   "smax:3s5z_vs_3s6z": dict(steps=1_000_000, eval_every=20, seeds=(0, 1, 2))}),
+                                                   "smax:6h_vs_8z": dict(steps=500_000, eval_every=10),
+                                                   "smax:3s5z_vs_3s6z": dict(steps=3_000_000, eval_every=40, seeds=(0, 1, 2))}),
                "paper": dict(eval_episodes=64, eval_every=25, envs={
                    "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
                    "smax:6h_vs_8z": dict(steps=40_000_000), "smax:3s5z_vs_3s6z": dict(steps=20_000_000),
@@ -294,13 +354,12 @@ GRID = (
            section="6.2", notebook="20_smax_fig4",
            reference="HARL's steps for the map"),
     # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
-    Figure("figA_mamujoco", tuple((a, dict(algo=a)) for a in FIGA_ALGOS), common=dict(env=HALFCHEETAH),
+    Figure("figA_mamujoco", tuple(FIGA_CURVES.items()), common=dict(env=HALFCHEETAH, ppo_epochs=15),
            runs_at=ENGINE_BUDGETS, budgets={
                "smoke": MAMUJOCO_SMOKE,
                # 1M steps: 10% of HARL's scale, where every curve has left its initial return (at 200k
-               # MAPPO and SEAC had not); an evaluation every 20
-               # iterations (40k steps) costs about 7% of the run
-               "cpu": dict(steps=1_000_000, eval_every=20, eval_episodes=3, config=MAMUJOCO_CPU),
+               # MAPPO and SEAC had not); 10 episodes every 20 iterations (40k steps)
+               "cpu": dict(steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU),
                "paper": dict(steps=10_000_000, eval_every=25, eval_episodes=10,
                              config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
            }, metric=RETURN, claims=(
@@ -309,8 +368,9 @@ GRID = (
                # using one's own (HAPPO), while OAPPO's gated reuse does not
                (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
                (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
-               (higher, ("oappo", "seac"), "OAPPO ends above direct reuse (SEAC)"),
-               (higher, ("oappo", "mappo"), "OAPPO ends above full sharing (MAPPO)")),
+               *(c for r, name in FIGA_READINGS.items()
+                 for c in ((higher, (r, "seac"), f"{name} ends above direct reuse (SEAC)"),
+                           (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)")))),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # Issue 31: does OAPPO's early reuse (its gate is open while the untrained nets look alike)
     # lower the return? Ten seed pairs at 600k steps, each point 10 episodes, so that an
@@ -328,10 +388,11 @@ GRID = (
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
-    Figure("fig_sweep_2s3z", tuple((f"{name} lr={lr:g} ent={ent:g}", dict(kw, lr=lr, critic_lr=lr, entropy_coef=ent))
-                                   for name, kw in SWEEP_FAMILIES for lr in SWEEP_LRS for ent in SWEEP_ENTROPIES),
-           common=dict(SMAX_BATCH, env="smax:2s3z", **{k: v for k, v in SMAX_TUNED.items()
-                                                      if k not in ("lr", "critic_lr", "entropy_coef")}),
+    Figure("fig_sweep_2s3z", tuple((f"{name} lr={lr:g} ent={ent:g}", dict(kw, **_swept(lr, ent)))
+                                   for name, kw in SWEEP_FAMILIES.items() for lr in SWEEP_LRS for ent in SWEEP_ENTROPIES)
+           + tuple((f"{name} lr={SWEEP_CHOSEN[name][0]:g} ent={SWEEP_CHOSEN[name][1]:g} clip={clip:g}",
+                    dict(kw, **_swept(*SWEEP_CHOSEN[name][:2], clip))) for name, kw in SWEEP_FAMILIES.items() for clip in SWEEP_CLIPS),
+           common=dict(SMAX_BATCH, env="smax:2s3z", **SMAX_TUNED),
            runs_at=("cpu",), budgets={"cpu": dict(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
     Figure("fig_a2c_smax", tuple((f"{a} lr={lr:g} ent={ent:g}", dict(algo=a, a2c_lr=lr, entropy_coef=ent))
@@ -344,6 +405,14 @@ GRID = (
                                      ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
                                                                            for k, v in kw.items()}))),
            common=dict(env=HALFCHEETAH), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # Issue 32: App. A's HAPPO settings (15 epochs) on the same robot with one agent (all six
+    # joints, the full observation), beside the two-leg HAPPO: what the split into two agents costs
+    # in our loop, against what our PPO costs against the single-agent anchor (stable-baselines3)
+    Figure("fig_single_agent", (("ppo one agent", dict(algo="happo", env="mamujoco:HalfCheetah-1x6")),
+                                ("happo two legs", dict(algo="happo", env=HALFCHEETAH))),
+           common=dict(ppo_epochs=15), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
@@ -404,7 +473,7 @@ def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
             continue
         b = fig.budget(budget, env)
         seeds = b.seeds if fig.seeds is None else b.seeds[:fig.seeds]
-        runs += [Run(fig.id, label, _config(b, seed=s, **fig.common, **kw), fig.cpus, fig.gpus, fig.memory_gb)
+        runs += [Run(fig.id, label, _config(b, seed=s, **{**fig.common, **kw}), fig.cpus, fig.gpus, fig.memory_gb)
                  for s in seeds]
     return runs
 

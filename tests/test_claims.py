@@ -46,7 +46,8 @@ def test_glance_budgets_are_shares_of_the_paper():
     assert claims.budget_share("fig3b", None) == "240k steps x 5 seeds; our budget, the paper gives none"
     assert claims.budget_share("fig6b", "grf:academy_3_vs_1_with_keeper") == \
         "32k steps x 3 seeds = 0.13% of 25M (HARL's tuned GRF steps)"
-    assert claims.budget_share("fig4_smax", "smax:6h_vs_8z") == "500k steps x 3 seeds = 1.2% of 40M (HARL's steps for the map)"
+    assert claims.budget_share("fig4_smax", "smax:6h_vs_8z") == "500k steps x 5 seeds = 1.2% of 40M (HARL's steps for the map)"
+    assert claims.budget_share("fig4_smax", "smax:3s5z_vs_3s6z") == "3M steps x 3 seeds = 15% of 20M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:MMM2_like_7m2M_vs_8m3M").startswith("not run at `cpu`")
 
 
@@ -61,6 +62,19 @@ def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
             for label, f in chosen["family"].items()} == grid.A2C_CHOSEN
+
+
+def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
+    """``grid.SWEEP_CHOSEN`` (Fig. 4's learning rate, entropy and clip per family) is what the
+    sweep's rule picks from the committed 2s3z sweep."""
+    from oapo_lite import experiments
+
+    df = experiments.read_figure("fig_sweep_2s3z", "cpu")[0]
+    family = {label: label.split(" lr=")[0] for label in df["label"].unique()}
+    table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
+    chosen = table[table["chosen"]]
+    assert {f: tuple(df.loc[df["label"] == label, ["lr", "entropy_coef", "clip"]].iloc[0])
+            for label, f in chosen["family"].items()} == grid.SWEEP_CHOSEN
 
 
 # the condition each status's reason states (``verdicts._reason``, ``faster``'s veto, ``_undecidable``,

@@ -126,7 +126,18 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
     # SMAX's cpu grid: the small maps and two of the paper's, each with its own steps; MMM2's
     # stand-in at paper only
     assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {
-        "smax:3m": 300_000, "smax:2s3z": 500_000, "smax:6h_vs_8z": 500_000, "smax:3s5z_vs_3s6z": 1_000_000}
+        "smax:3m": 300_000, "smax:2s3z": 500_000, "smax:6h_vs_8z": 500_000, "smax:3s5z_vs_3s6z": 3_000_000}
+    # issue 32: every family at its sweep's choice, OAPPO's per-kind reading only where kinds differ,
+    # and the 3M-step map for MAPPO, HAPPO and the per-kind reading alone
+    by_env = {e: {r.label for r in cpu["fig4_smax"] if r.cfg.env == e} for e in grid.get_figure("fig4_smax").envs("cpu")}
+    assert "oappo type" in by_env["smax:2s3z"] and "oappo type" not in by_env["smax:3m"] | by_env["smax:6h_vs_8z"]
+    assert by_env["smax:3s5z_vs_3s6z"] == set(grid.LONG_SMAX_CURVES)
+    for r in cpu["fig4_smax"]:
+        family = {"oappo": "happo"}.get(r.label, r.label)
+        if family in grid.SWEEP_CHOSEN:
+            assert (r.cfg.lr, r.cfg.entropy_coef, r.cfg.clip) == grid.SWEEP_CHOSEN[family], r.label
+        elif r.cfg.algo in grid.A2C_CHOSEN:
+            assert (r.cfg.a2c_lr, r.cfg.entropy_coef) == grid.A2C_CHOSEN[r.cfg.algo]
     paper = {r.cfg.env: r.cfg.steps for r in grid.runs_of("fig4_smax", "paper")}
     assert paper["smax:6h_vs_8z"] == 40_000_000 and len(paper) == 5
     # A2C runs evaluate at the same env steps as the PPO family on an engine's batch shape too

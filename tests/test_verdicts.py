@@ -234,18 +234,19 @@ def test_stabler_compares_the_largest_drop_below_an_earlier_peak():
 def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     learned = {"oappo": [0, 0.6, 0.9, 0.9], "mappo": [0, 0.1, 0.2, 0.3], "happo": [0, 0.1, 0.6, 0.7]}
     out = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned))}
-    assert out["2s3z: OAPPO ends above MAPPO (heterogeneous agents)"].held
-    assert out["2s3z: OAPPO converges faster than HAPPO"].held
-    assert out["6h_vs_8z: OAPPO ends above MAPPO"].status == v.NOT_TESTABLE  # no run on that map
+    assert out["2s3z: OAPPO (a net per agent) ends above MAPPO (heterogeneous agents)"].held
+    assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].held
+    assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_TESTABLE  # no run on that map
+    assert out["2s3z: OAPPO (a net per kind) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
     nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
     assert {x.status for x in v.claims("fig4_smax", nothing)} == {v.NOT_TESTABLE}
     one_seed = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned, seeds=1))}
-    verdict = one_seed["2s3z: OAPPO ends above HAPPO (heterogeneous agents)"]
+    verdict = one_seed["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"]
     assert verdict.status == v.NOT_TESTABLE and "fewer than 2 seeds" in verdict.reason
     never_half = win_curves({"oappo": [0, 0.2, 0.3, 0.4], "happo": [0, 0.1, 0.3, 0.3], "mappo": [0, 0.1, 0.1, 0.1]})
     out = {x.claim: x for x in v.claims("fig4_smax", never_half)}
-    assert out["2s3z: OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
-    assert out["2s3z: OAPPO ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE
+    assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].status == v.NOT_TESTABLE
+    assert out["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE
 
 
 def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data():
@@ -255,7 +256,7 @@ def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data
     verdicts = {x.claim: x for x in v.claims("figA_mamujoco", df)}
     assert verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].held
     assert "final evaluation return, IQM [95% CI]: happo 1000.000" in verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].evidence
-    assert verdicts["OAPPO ends above full sharing (MAPPO)"].held
+    assert verdicts["OAPPO (a net per agent) ends above full sharing (MAPPO)"].held
     seac = verdicts["direct reuse (SEAC) ends below no reuse (HAPPO)"]
     assert seac.status == v.NOT_TESTABLE and "seac (0)" in seac.reason and not seac.held
     swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))

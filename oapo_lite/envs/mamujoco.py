@@ -26,6 +26,7 @@ from .vec import VecStep
 
 # name -> equal spaces for every agent (checked against the engine by the tests)
 PARTITIONS: dict[str, bool] = {
+    "HalfCheetah-1x6": True,  # one agent with all six joints: single-agent HalfCheetah through the same engine
     "HalfCheetah-2x3": True,
     "HalfCheetah-6x1": False,
     "Ant-2x4": True,
@@ -71,6 +72,7 @@ def env_fn(name: str, max_steps: int):
         raise ImportError(f"mamujoco:{name} needs gymnasium-robotics and mujoco; install the pins "
                           f"of environment.txt (pip install -r environment.txt): {err}") from None
     robot, partition = name.split("-")
+    partition = None if partition.startswith("1x") else partition  # the engine's one-agent configuration
 
     def make():
         with _quiet_c_stderr():
