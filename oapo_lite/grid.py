@@ -148,6 +148,8 @@ FIGA_ALGOS = tuple(FIGA_CURVES)
 HALFCHEETAH = "mamujoco:HalfCheetah-2x3"
 # the cpu batch on HalfCheetah: 8 copies x 250 steps, MuJoCo's 1,000-step episodes
 MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)
+# HAPPO's settings and the one-agent control: App. A's cpu runs at 3 seeds
+HALFCHEETAH_1M = dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)
 MAMUJOCO_SMOKE = dict(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100))
 # Issue 31's closing table: OAPPO under each reading of the paper's networks and each statistic
 # of Eq. 9's gate, beside HAPPO and MAPPO, at the cpu configs of Fig. 4 (seeds 0-2) and of the
@@ -244,8 +246,6 @@ def _smax_claims(m: str) -> list:
 
 
 FIGA_READINGS = {r: SMAX_READINGS[r] for r in FIGA_CURVES if r in SMAX_READINGS}
-
-
 
 
 # Issue 32: HARL's tuned HalfCheetah 2x3 HAPPO settings tried in our loop one at a time, then
@@ -405,7 +405,7 @@ GRID = (
                                      ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
                                                                            for k, v in kw.items()}))),
            common=dict(env=HALFCHEETAH), runs_at=("cpu",),
-           budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
+           budgets={"cpu": HALFCHEETAH_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # Issue 32: App. A's HAPPO settings (15 epochs) on the same robot with one agent (all six
     # joints, the full observation), beside the two-leg HAPPO: what the split into two agents costs
@@ -413,7 +413,7 @@ GRID = (
     Figure("fig_single_agent", (("ppo one agent", dict(algo="happo", env="mamujoco:HalfCheetah-1x6")),
                                 ("happo two legs", dict(algo="happo", env=HALFCHEETAH))),
            common=dict(ppo_epochs=15), runs_at=("cpu",),
-           budgets={"cpu": dict(seeds=(0, 1, 2), steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)},
+           budgets={"cpu": HALFCHEETAH_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},

@@ -50,7 +50,7 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     seeds_of = {}
-    for label in order:  # the bold IQMs first, every curve's seeds on top: no seed hides under another curve
+    for label in order:  # the bold medians first, every curve's seeds on top: no seed hides under another curve
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)
         color = (colors or {}).get(label) or color_of(label, order)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
