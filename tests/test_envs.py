@@ -5,8 +5,9 @@ from pettingzoo.test import parallel_api_test
 
 from oapo_lite.envs import (
     MAPS, STEP_COST, MazeParallelEnv, VecMaze, conflict_cells, distances, load_maze, make_vec,
-    optimal_actions, optimal_return, save_maze_png, shortest_route,
+    one_policy_return, optimal_actions, optimal_return, save_maze_png, shortest_route,
 )
+from oapo_lite.envs.layouts import load_layout
 from oapo_lite.envs.maps import ALLOWED, STAR, WALL
 
 NAMES = sorted(MAPS)
@@ -320,6 +321,48 @@ def test_black_red_shared_policy_cannot_be_optimal():
     vertex = (1.0 - STEP_COST * (1.0 + after)).mean(0).max()
     assert vertex <= analytic < optimum
     assert vertex == pytest.approx(optimum - STEP_COST)
+
+
+def test_one_policy_on_one_conflict_cell_loses_one_move_per_agent():
+    """On the single conflict cell a wrong move is a bump, so red stays there for (1 - q) / q
+    moves on average and black for q / (1 - q); the sum is least, 2, at q = 1/2."""
+    maze = load_layout("fork-p2-c1-b4-s3-h3")
+    value, q = one_policy_return(maze, 50)
+    assert q == {conflict_cells(maze, 0, 1)[0]: 0.5}
+    assert value == pytest.approx(optimal_return(maze) - STEP_COST * 2 / 2, abs=1e-9)
+
+
+def test_one_policy_return_is_what_sampled_episodes_earn():
+    maze = load_layout("fork-p2-c3-b4-s3-h3")
+    value, q = one_policy_return(maze, 50)
+    best = optimal_actions(maze)
+    rng = np.random.default_rng(0)
+    env, returns = VecMaze(maze, n_envs=4000, max_steps=50), np.full(4000, np.nan)
+    cells = np.array([[maze.starts[0], maze.starts[1]]] * 4000)
+    env.reset()
+    while np.isnan(returns).any():
+        actions = np.empty((4000, 2), dtype=np.int64)
+        for k in range(2):
+            for e, c in enumerate(cells[:, k]):
+                if c in q:  # red's move with probability q, black's otherwise
+                    actions[e, k] = np.argmax(best[int(rng.random() >= q[c]), c])
+                else:
+                    common = best[0, c] & best[1, c]
+                    actions[e, k] = np.argmax(common if common.any() else best[0, c] | best[1, c])
+        out = env.step(actions)
+        cells = env.cells.copy()
+        first = np.isnan(returns) & ~np.isnan(out.episode_return)
+        returns[first] = out.episode_return[first]
+    assert abs(returns.mean() - value) < 4 * returns.std() / np.sqrt(len(returns))
+    assert value < optimal_return(maze)
+
+
+def test_one_policy_level_falls_with_every_conflict_cell():
+    levels = [one_policy_return(m, 50)[0] / optimal_return(m)
+              for m in (load_layout(f"fork-p2-c{c}-b4-s3-h3") for c in (1, 3, 5, 7))]
+    assert levels == sorted(levels, reverse=True) and levels[0] < 1
+    with pytest.raises(ValueError, match="compares two seats"):
+        one_policy_return(load_maze("black_blue_red"), 50)
 
 
 def test_black_red_routes_share_cells_with_the_same_move():

@@ -94,3 +94,54 @@ def conflict_cells(maze: Maze, k: int, l: int) -> list[int]:
     both[maze.star] = False
     disjoint = ~(best[k] & best[l]).any(-1)
     return np.flatnonzero(both & disjoint).tolist()
+
+
+def one_policy_return(maze: Maze, max_steps: int, resolution: int = 100) -> tuple[float, dict[int, float]]:
+    """The best expected team return of two seats that follow one policy of the cell alone, as
+    one network must where observations carry no agent identity (``Maze.obs_table``).
+
+    The policy takes the seats' shared optimal move where they have one, the optimal move of
+    the seat that can use a cell elsewhere, and on each conflict cell (``conflict_cells``) seat
+    0's optimal move with probability q and seat 1's with 1 - q. Its return under the reward
+    rule (``core``) within ``max_steps`` is exact: each seat's distribution over cells is
+    propagated step by step (seats never interact). Every q is chosen by coordinate ascent
+    on a grid of step 1 / ``resolution``. Returns that return and the q of each conflict cell.
+    """
+    if maze.n_agents != 2:
+        raise ValueError(f"one_policy_return compares two seats, maze {maze.name!r} has {maze.n_agents}")
+    best = optimal_actions(maze)
+    usable = best[0] & best[1]
+    usable = np.where(usable.any(-1, keepdims=True), usable, best[0] | best[1])
+    base = np.zeros((maze.n_cells, best.shape[-1]))
+    base[np.arange(maze.n_cells), np.argmax(usable, -1)] = 1.0
+    conflicts = conflict_cells(maze, 0, 1)
+    moves = {c: (int(np.argmax(best[0, c])), int(np.argmax(best[1, c]))) for c in conflicts}
+    cells = np.arange(maze.n_cells)
+
+    def team_return(q: dict[int, float]) -> float:
+        policy = base.copy()
+        for c, (a0, a1) in moves.items():
+            policy[c] = 0.0
+            policy[c, a0], policy[c, a1] = q[c], 1.0 - q[c]
+        total = 0.0
+        for k in range(2):
+            step = np.zeros((maze.n_cells, maze.n_cells))
+            for a in range(policy.shape[1]):
+                np.add.at(step, (cells, maze.next_cell[k, :, a]), policy[:, a])
+            p = np.zeros(maze.n_cells)
+            p[maze.starts[k]] = 1.0
+            for _ in range(max_steps):
+                arrived = p[maze.star]
+                p = p @ step
+                total += p[maze.star] - arrived - STEP_COST * (1.0 - arrived)
+        return total / 2
+
+    q = {c: 0.5 for c in conflicts}
+    value, grid = team_return(q), np.linspace(0.0, 1.0, resolution + 1)
+    while True:
+        before = value
+        for c in conflicts:
+            values = [team_return(q | {c: g}) for g in grid]
+            q[c], value = float(grid[int(np.argmax(values))]), max(values)
+        if value <= before + 1e-12:
+            return value, q
