@@ -143,6 +143,13 @@ def test_a_typed_seed_count_the_data_contradict_is_found(tmp_path):
     assert [e.split(" (")[0] for e in typed_budget_errors(path)] == ["7 seeds", "3% of HARL's 25M"]
 
 
+@pytest.mark.parametrize("path", [p for p in NOTEBOOKS if int(p.name[:2]) >= 10], ids=lambda p: p.stem)
+def test_every_empirical_notebook_has_an_exercise(path):
+    """CI runs every notebook at ``smoke``, so each exercise's solution runs there too."""
+    cells = nbformat.read(path, as_version=4).cells
+    assert any(c.cell_type == "markdown" and c.source.startswith("**Exercise") for c in cells)
+
+
 def test_every_exercise_keeps_its_answer_folded_until_unfolded():
     """An exercise's prompt states no answer, and its solution (the next code cell) is folded,
     code and output, in JupyterLab (``jupyter`` metadata) and in the book (``hide-cell``)."""
