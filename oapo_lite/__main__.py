@@ -76,12 +76,27 @@ def train_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _refuse_ignored(parser: argparse.ArgumentParser, argv: list[str], algo: str) -> None:
+    """A flag given for a field the algorithm does not read is an error, not a silent no-op."""
+    from oapo_lite.config import ALGOS, readers
+
+    if algo not in ALGOS:
+        return  # TrainConfig names the algorithms
+    for action in parser._actions:
+        given = any(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in argv)
+        if given and algo not in readers(action.dest):
+            parser.error(f"{action.option_strings[0]} does not apply to --algo {algo}; only {readers(action.dest)} "
+                         "read it")
+
+
 def train_main(argv: list[str]) -> int:
     from oapo_lite.config import TrainConfig
     from oapo_lite.experiments import run_id
     from oapo_lite.train import train
 
-    args = vars(train_parser().parse_args(argv))
+    parser = train_parser()
+    args = vars(parser.parse_args(argv))
+    _refuse_ignored(parser, argv, args["algo"])
     out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")
     name, file_name = args["env"], None
     if name not in MAPS and Path(name).is_file():
@@ -130,8 +145,12 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     debug = cli.debug_requested(argv)
     argv = [a for a in argv if a != "--debug"]
-    if not argv or argv[0] not in COMMANDS:
-        print(__doc__.strip(), file=sys.stderr)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__.strip())
+        return 0 if argv else 2
+    if argv[0] not in COMMANDS:
+        print(f"error: unknown command {argv[0]!r}; the commands are {list(COMMANDS)} (python -m oapo_lite --help)",
+              file=sys.stderr)
         return 2
     try:
         return COMMANDS[argv[0]](argv[1:])

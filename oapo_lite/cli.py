@@ -4,12 +4,19 @@ traceback (``--debug`` or ``OAPO_DEBUG=1``), with exit status 1."""
 from __future__ import annotations
 
 import argparse
+import errno
 import os
+import re
 import sys
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, but a bad argument is one line (argparse prints its whole usage first)."""
+    """argparse, but a bad argument is one line (argparse prints its whole usage first), and a
+    flag must be spelled in full (an abbreviation could silently name another flag)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
@@ -19,10 +26,35 @@ def debug_requested(argv: list[str]) -> bool:
     return "--debug" in argv or os.environ.get("OAPO_DEBUG", "") not in ("", "0")
 
 
+# what ran out, and what to do, for the errors of the machine rather than of the request
+OUT_OF_MEMORY = re.compile(r"can't allocate memory|not enough memory|out of memory|unable to allocate", re.I)
+RESOURCES = {
+    errno.ENOSPC: "no space left on the device{where}; free some space or write elsewhere (--out, OAPO_FIGURES)",
+    errno.EDQUOT: "disk quota exceeded{where}; free some space or write elsewhere (--out, OAPO_FIGURES)",
+    errno.EACCES: "permission denied{where}; write elsewhere (--out, OAPO_FIGURES) or fix the folder's permissions",
+    errno.EROFS: "read-only file system{where}; write elsewhere (--out, OAPO_FIGURES)",
+}
+
+
+def resource_error(err: BaseException) -> str | None:
+    """One line naming what ran out and what to do, or None if ``err`` is not such an error."""
+    if isinstance(err, MemoryError) or (isinstance(err, RuntimeError) and OUT_OF_MEMORY.search(str(err))):
+        detail = " ".join(str(err).split())[:200]
+        return (f"out of memory ({detail or 'MemoryError'}); lower the sizes that scale it (--n-envs, "
+                "--eval-episodes, --hidden, --workers) or free memory")
+    if isinstance(err, OSError) and err.errno in RESOURCES:
+        return RESOURCES[err.errno].format(where=f" writing {err.filename}" if err.filename else "")
+    return None
+
+
 def report(err: Exception) -> int:
     """Print ``err`` as one line on stderr; the exit status."""
     from oapo_lite.losses import Diverged
 
+    resource = resource_error(err)
+    if resource:
+        print(f"error: {resource}", file=sys.stderr)
+        return 2
     # bad values, damaged or unwritable files, a missing engine, a run that diverged: the message
     # says what and what to do; anything else is a bug
     known = isinstance(err, (ValueError, OSError, ImportError, Diverged))

@@ -13,6 +13,7 @@ import numpy as np
 from oapo_lite import adaptive
 from oapo_lite.reuse import KL_REDUCES, SCHEMES
 from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.oracle import check_fits
 
 
 NETWORKS = ("agent", "type", "one")  # one network per seat, per kind of seat, for every seat
@@ -38,6 +39,30 @@ ALGOS = {
     "seac": AlgoSpec(None, False, False, False, a2c=True),
     "seps": AlgoSpec(None, False, False, False, a2c=True),
 }
+
+
+# The fields only some algorithms read; every other field applies to every run. A run refuses a
+# value other than the default in a field its algorithm does not read (it could not honour it).
+EQ9_FIELDS = ("sigma", "reuse_lambda", "kl_reduce", "reuse_mode", "allowed", "reuse_adapt", "reuse_warmup")
+TRPO_FIELDS = ("kl_threshold", "cg_iters", "cg_damping", "line_search_steps", "backtrack", "accept_ratio")
+A2C_FIELDS = ("n_step", "a2c_lr", "a2c_adam_eps", "a2c_max_grad_norm")
+ONLY = {"seac_lambda": ("seac",), "seps_clusters": ("seps",), "seps_pretrain_steps": ("seps",)}
+# the PPO / TRPO fields SEAC and SePS ignore: the grids pass a map's common settings to every
+# curve, so a config accepts them and only the command line refuses them when given
+A2C_IGNORES = ("rollout_len", "lr", "critic_lr", "ppo_epochs", "n_minibatch", "clip", "max_grad_norm", "gae_lambda",
+               "value_norm", "update_by", "entropy_by_weight")
+
+
+def readers(name: str) -> list[str]:
+    """The algorithms that read field ``name`` (all of them for a field every run reads)."""
+    if name in ONLY:
+        return list(ONLY[name])
+    spec_ok = {EQ9_FIELDS: lambda s: s.reuse == "oapo", TRPO_FIELDS: lambda s: s.trust_region,
+               A2C_FIELDS: lambda s: s.a2c, A2C_IGNORES: lambda s: not s.a2c}
+    for fields, ok in spec_ok.items():
+        if name in fields:
+            return sorted(a for a, s in ALGOS.items() if ok(s))
+    return sorted(ALGOS)
 
 
 def _is_int(x) -> bool:
@@ -141,11 +166,6 @@ class TrainConfig:
             x = getattr(self, name)
             need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name, allowed)
 
-        def eq9_only(name: str, off: str):
-            """``name`` set only for an algorithm that reuses by Eq. 9 (the others have no M to change)."""
-            eq9 = sorted(a for a in ALGOS if ALGOS[a].reuse == "oapo")
-            need(ALGOS[self.algo].reuse == "oapo", name, f"{off} with algo {self.algo!r}; only {eq9} reuse by Eq. 9")
-
         need(isinstance(self.algo, str) and self.algo in ALGOS, "algo", str(sorted(ALGOS)))
         need(self.env_fn is None or callable(self.env_fn), "env_fn", "None or a callable that returns a PettingZoo "
                                                                        "ParallelEnv")
@@ -161,8 +181,9 @@ class TrainConfig:
             whole(name)
         whole("seed", 0)
         whole("reuse_warmup", 0)
-        if self.reuse_warmup:
-            eq9_only("reuse_warmup", "0")
+        maze = env_registry.maze_of(self.env) if self.env_fn is None else None
+        if maze is not None:
+            check_fits(maze, self.max_steps)
         need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):
@@ -196,7 +217,6 @@ class TrainConfig:
              f"None or one of {list(adaptive.ADAPT_RULES)}")
         if self.reuse_adapt is not None:
             # the rule rescales Eq. 9's matrix between separate learners
-            eq9_only("reuse_adapt", "None")
             need(self.network_kind == "agent" and self.update_by == "net", "reuse_adapt",
                  "None unless every seat has its own network, updated once (networks='agent', update_by='net')")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
@@ -224,6 +244,12 @@ class TrainConfig:
         if self.algo == "seps":
             need(self.n_envs * self.n_step <= self.seps_pretrain_steps < self.steps, "seps_pretrain_steps",
                  f">= n_envs * n_step = {self.n_envs * self.n_step} (one iteration) and < steps = {self.steps}")
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for name in (*EQ9_FIELDS, *TRPO_FIELDS, *A2C_FIELDS, *ONLY):
+            value, default = getattr(self, name), defaults[name]
+            same = value is default or (value is not None and not isinstance(value, np.ndarray) and value == default)
+            need(same or self.algo in readers(name), name,
+                 f"{default!r} with algo {self.algo!r}; only {readers(name)} read it")
 
     @property
     def rollout_steps(self) -> int:

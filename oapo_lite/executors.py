@@ -50,8 +50,9 @@ def local(jobs, workers: int = 2, address: str | None = None):
         return
     # spawned, not forked: a parent that has imported JAX (SMAX) or started torch's threads
     # cannot fork safely (JAX warns of deadlocks; a forked pool hung the test suite)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
-                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
+                               initializer=die_with_parent, initargs=(os.getpid(),))
+    try:
         futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
         for future in as_completed(futures):
             try:
@@ -59,6 +60,19 @@ def local(jobs, workers: int = 2, address: str | None = None):
             except Exception:  # the worker process itself died (killed, out of memory)
                 rows, error = None, traceback.format_exc()
             yield futures[future], rows, error
+    except BaseException:  # an interrupt (or the caller stopped early): queued runs never start
+        stop(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel a pool's queued jobs and end its running workers at once (a run resumes from its
+    last checkpoint). Without this, leaving the pool waits for every queued run to finish."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in list((pool._processes or {}).values()):  # no public way to end running workers (3.11)
+        process.terminate()
 
 
 def die_with_parent(parent: int) -> None:

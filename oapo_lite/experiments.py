@@ -17,6 +17,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from oapo_lite.config import TrainConfig
@@ -89,8 +90,13 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
         raise DamagedFile(f"run file {path} is not the whole run: its steps are not the {len(cfg.eval_steps)} "
                           f"evaluation steps of its config ({cfg.eval_steps[0]} to {cfg.eval_steps[-1]}), found "
                           f"{len(df)} rows; {RETRAIN}")
-    if (df["seed"].astype(str) != str(cfg.seed)).any() or (df["algo"].astype(str) != cfg.algo).any():
-        raise DamagedFile(f"run file {path} holds another run's rows (seed or algo differ); {RETRAIN}")
+    differ = _config_differs(df, cfg)
+    if differ:
+        raise DamagedFile(f"run file {path} holds another run's rows: its {differ} column does not say "
+                          f"{cfg.flat()[differ]!r}; {RETRAIN}")
+    text = [c for c in RESULTS if c in df and pd.to_numeric(df[c], errors="coerce").isna().ne(df[c].isna()).any()]
+    if text:
+        raise DamagedFile(f"run file {path} has text where its {text} hold numbers; {RETRAIN}")
     try:
         return read_arrays(df, MATRICES)
     except ValueError as err:  # not JSON
@@ -98,6 +104,29 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
 
 
 MATRICES = ("kl_matrix", "reuse_matrix", "agreement")  # per-iteration matrices, arrays once read
+RESULTS = ("iteration", "step", "eval_return", "frac_opt", "eval_success", "train_return")
+
+
+def _config_differs(df: pd.DataFrame, cfg: TrainConfig) -> str | None:
+    """The first config field whose column in a run file disagrees with ``cfg``, or None. A
+    column the file lacks is a field added since it was written: its default is what ran."""
+    defaults = TrainConfig.__dataclass_fields__
+    for name, value in cfg.flat().items():
+        if name not in df:
+            if name in defaults and getattr(cfg, name) == defaults[name].default:
+                continue
+            return name
+        column = df[name]
+        if value is None:
+            same = column.isna().all()
+        elif isinstance(value, (bool, np.bool_)) or isinstance(value, str):
+            same = (column.astype(str) == str(value)).all()
+        else:
+            numbers = pd.to_numeric(column, errors="coerce")
+            same = numbers.notna().all() and np.allclose(numbers.to_numpy(float), float(value), rtol=1e-12, atol=0)
+        if not same:
+            return name
+    return None
 
 
 RETRAIN = "delete it, or let `python -m oapo_lite reproduce` train the run again"
@@ -199,7 +228,28 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
             if progress == "lines":
                 print(f"runs ({budget}, {executor}): {k}/{len(missing)} {'done' if error is None else 'FAILED'} "
                       f"{run_id(run.cfg)}", flush=True)
+    for figure in figures:
+        export_figure(figure, budget)
     return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
+
+
+def export_figure(figure, budget: str) -> Path | None:
+    """Write a grid figure's rows to ``<data>/<figure>.csv`` (what a researcher opens) once every
+    run of it is on disk; the writer of the run cache does this, so that reading never writes.
+    An unchanged file is left alone. Returns the path written, or None."""
+    name = getattr(figure, "id", figure)
+    if name not in grid.FIGURES or missing_runs(name, budget):
+        return None
+    df, _ = read_figure(name, budget)
+    path = data_dir(budget) / f"{name}.csv"
+    old = path.read_bytes() if path.exists() else None
+    staged = path.with_name(f".{path.name}.new")
+    write_frame(df, staged)
+    if staged.read_bytes() == old:
+        staged.unlink()
+        return None
+    os.replace(staged, path)
+    return path
 
 
 def missing_runs(figure: str, budget: str) -> list[Run]:
@@ -251,12 +301,11 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
 
 
 def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
-    """``read_figure``, saying what it left out, and the rows written to the figure's CSV
-    (``<data>/<figure>.csv``, what a researcher opens; nothing is trained: ``train_runs``)."""
+    """``read_figure``, saying what it left out. Reads only: nothing is trained (``train_runs``)
+    and nothing written (``export_figure``)."""
     df, missing = read_figure(figure, budget, skip_missing)
     if df.empty:
         return df
-    write_frame(df, data_dir(budget) / f"{figure}.csv")
     if missing:
         print(f"warning: {figure} at budget {budget!r} leaves out {len(missing)} runs not on disk (missing_runs)")
     revisions = sorted(df["git_rev"].astype(str).unique())

@@ -41,18 +41,20 @@ def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
 
 def load(budget: str, layouts=None) -> pd.DataFrame:
     """Tidy rows of the study, read from the run cache (``experiments.train_runs(budget,
-    figures())`` trains what is missing); the whole study's runs, one row each (``per_run``),
-    are also written to ``<data>/fig_layout_study.csv``: what its figure is drawn from."""
+    figures())`` trains what is missing; ``export`` writes the study's table). Reads only."""
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         if not experiments.run_path(cfg, budget).exists():
             raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: "
                                     f"{experiments.run_path(cfg, budget)}")
         frames.append(experiments.read_run(cfg, budget).assign(layout=name, label=label))
-    df = pd.concat(frames, ignore_index=True)
-    if layouts is None:
-        store.write_frame(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")
-    return df
+    return pd.concat(frames, ignore_index=True)
+
+
+def export(df: pd.DataFrame, budget: str) -> None:
+    """The whole study's runs, one row each (``per_run``), to ``<data>/fig_layout_study.csv``:
+    what its figure is drawn from."""
+    store.write_frame(per_run(df), experiments.data_dir(budget) / "fig_layout_study.csv")
 
 
 RUN_FIELDS = ["algo", "env", "sigma", "reuse_lambda", "reuse_adapt", "steps", "git_rev"]  # what identifies a run

@@ -48,6 +48,10 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     range. The title gets a line saying so. ``colors``: label -> colour, where a figure needs
     its own (else ``color_of``)."""
     ax = ax or plt.subplots(figsize=(6, 4))[1]
+    if df.empty:  # e.g. load_figure(..., skip_missing=True) with nothing on disk
+        ax.text(0.5, 0.5, "no runs on disk", ha="center", va="center", transform=ax.transAxes)
+        ax.set(title=title)
+        return ax
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     seeds_of = {}
     for label in order:  # the bold medians first, every curve's seeds on top: no seed hides under another curve

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -32,6 +33,26 @@ def takes_budget(path: Path) -> bool:
     return any(
         "parameters" in c.metadata.get("tags", []) and "budget" in c.source for c in nb.cells
     )
+
+
+def check_parameters(*names: str) -> None:
+    """Stop a notebook run with a parameter it does not take: papermill only warns, and a
+    misspelled ``budgte`` would run the committed budget. Called first in the cell after the
+    ``parameters`` cell, which is where papermill puts the cell it injects (its source starts
+    "# Parameters"); outside papermill there is nothing to check."""
+    import ast
+
+    from IPython import get_ipython
+
+    shell = get_ipython()
+    injected = [src for src in (shell.user_ns.get("In", []) if shell else []) if src.startswith("# Parameters")]
+    if not injected:
+        return
+    given = {t.id for node in ast.parse(injected[-1]).body if isinstance(node, ast.Assign)
+             for t in node.targets if isinstance(t, ast.Name)}
+    unknown = sorted(given - set(names))
+    if unknown:
+        raise ValueError(f"unknown notebook parameter(s) {unknown}; this notebook takes {sorted(names)}")
 
 
 class NotebookFailed(RuntimeError):
@@ -100,26 +121,29 @@ def _timed_run(path: Path, out: Path, parameters: dict) -> float:
 def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[str, float]]:
     """Execute every numbered notebook, ``workers`` at a time (each in its own kernel; they
     only read the finished runs); ``inplace`` overwrites the committed copies."""
+    import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from oapo_lite.executors import die_with_parent
+    from oapo_lite.executors import die_with_parent, stop
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = notebook_paths(budget)
     timings = {}
-    with ProcessPoolExecutor(max_workers=workers, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+    # spawned, as the training pool, and no more workers than notebooks: a fork pool starts all
+    # of its workers at the first submit, each a copy of this process
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(paths))), mp_context=mp.get_context("spawn"),
+                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_timed_run, path, out_dir / path.name,
                                {"budget": budget} if takes_budget(path) else {}): path for path in paths}
-        for i, future in enumerate(as_completed(futures), 1):
-            path = futures[future]
-            try:
+        try:
+            for i, future in enumerate(as_completed(futures), 1):
+                path = futures[future]
                 timings[path.name] = future.result()
-            except NotebookFailed:
-                for other in futures:
-                    other.cancel()
-                raise
-            print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {timings[path.name]:.1f} s", flush=True)
+                print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {timings[path.name]:.1f} s", flush=True)
+        except BaseException:  # a failed notebook or an interrupt: the others are not waited for
+            stop(pool)
+            raise
     return [(path.name, timings[path.name]) for path in paths]
 
 
@@ -140,6 +164,10 @@ def _check_writable(folder: Path) -> None:
         moved = f" (OAPO_FIGURES={os.environ['OAPO_FIGURES']!r})" if os.environ.get("OAPO_FIGURES") else ""
         raise ValueError(f"cannot write results to {folder}{moved}: {err.strerror}; "
                          "point OAPO_FIGURES at a folder you can write") from None
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -177,9 +205,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(err))
 
     start = time.perf_counter()
-    runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
-                               progress="lines" if args.check else True, executor=args.executor,
-                               address=args.address)
+    signal.signal(signal.SIGTERM, _interrupt)  # a SIGTERM stops the work as Ctrl-C does
+    try:
+        runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
+                                   progress="lines" if args.check else True, executor=args.executor,
+                                   address=args.address)
+    except KeyboardInterrupt:
+        done = sum(experiments.on_disk(r.cfg, args.budget) for r in experiments.grid_runs(args.budget, args.figures))
+        print(f"\ninterrupted: {done} runs of {args.figures} at budget {args.budget!r} are on disk, queued runs "
+              "were not started, running ones stopped (they resume from their last checkpoint); run the same "
+              "command again to resume", file=sys.stderr)
+        return 130
     try:
         timings = [] if args.skip_notebooks or runs.failed else run_notebooks(args.budget, args.inplace,
                                                                               args.workers)

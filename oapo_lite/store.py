@@ -6,9 +6,11 @@ an ``flock`` on a file: the kernel releases it when its holder dies, however it 
 """
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
+import shutil
 import socket
 from pathlib import Path
 from typing import Callable
@@ -56,10 +58,19 @@ def atomic_write(write: Callable[[str], None], path: Path) -> None:
     remove_stale_tmp(path)
     tmp = _tmp_name(path, os.getpid())
     try:
-        write(str(tmp))
+        try:
+            write(str(tmp))
+        except RuntimeError as err:
+            # torch.save reports a failed write (a full disk: "unexpected pos") as a RuntimeError
+            raise OSError(_write_errno(path), f"cannot write {path}: {err}", str(path)) from err
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _write_errno(path: Path) -> int:
+    """ENOSPC when the device holding ``path`` is (nearly) full, else EIO."""
+    return errno.ENOSPC if shutil.disk_usage(path.parent).free < 2**20 else errno.EIO
 
 
 def write_frame(df: pd.DataFrame, path: Path) -> None:

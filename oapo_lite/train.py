@@ -13,6 +13,7 @@ checkpoint (``runstate.load_history``).
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -40,6 +41,12 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     forwards during rollouts, learning and evaluation (for the benchmarks). The per-iteration
     metrics are in the checkpoint: ``runstate.load_history(out_dir)``.
     """
+    if not isinstance(cfg, TrainConfig):
+        raise TypeError(f"train's cfg must be a TrainConfig, got {type(cfg).__name__} {cfg!r}; "
+                        "e.g. train(TrainConfig(algo='oappo'), 'runs/x')")
+    if not isinstance(out_dir, (str, os.PathLike)):
+        raise TypeError(f"train's out_dir must be a folder path (str or Path), got {type(out_dir).__name__} "
+                        f"{out_dir!r}")
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -95,6 +95,8 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     optimum, a win rate or a return, as ``y`` is), its initial value (its first ``INITIAL``), its
     peak, and its largest drop below an earlier peak."""
     rows = []
+    if df.empty:
+        df = pd.DataFrame(columns=["label", "seed", "step", y])
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
         k, k0 = max(1, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))
@@ -112,7 +114,11 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
             "reusing": float(np.mean(shares[learning] > 0)) if learning.any() else np.nan,
             "last_reuse_step": float(steps[shares > 0].max()) if (shares > 0).any() else np.nan,
         })
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=PER_RUN_COLUMNS)  # the columns even for a frame with no run
+
+
+PER_RUN_COLUMNS = ["label", "seed", "steps_to_threshold", "reached", "initial", "final", "peak", "drawdown", "reusing",
+                   "last_reuse_step"]
 
 
 def _peer_shares(run: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -132,6 +138,8 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     where the run recorded it (``iterations_reusing``, at its last evaluation), else NaN. Runs
     without a reuse matrix (SEAC, SePS) have no row."""
     rows = []
+    if df.empty:
+        df = pd.DataFrame(columns=["label", "seed", "step", y])
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         steps, share = _peer_shares(run)
         if not len(steps):  # SEAC, SePS: no reuse matrix
@@ -248,7 +256,10 @@ def probability_of_improvement(x, y, axis: int = -1):
     statistic of x over y divided by n_x n_y (rliable's probability of improvement, one task)."""
     x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)[..., :, None]
     y = np.moveaxis(np.asarray(y, dtype=float), axis, -1)[..., None, :]
-    return ((x > y) + 0.5 * (x == y)).mean(axis=(-2, -1))
+    p = ((x > y) + 0.5 * (x == y)).mean(axis=(-2, -1))
+    # a NaN ranks nowhere: counted as a loss it would bias P towards 0, so P is NaN instead
+    p = np.where(np.isnan(x).any(axis=(-2, -1)) | np.isnan(y).any(axis=(-2, -1)), np.nan, p)
+    return float(p) if p.ndim == 0 else p
 
 
 def bootstrap_interval(statistic, *samples, confidence: float = CONFIDENCE,
@@ -322,7 +333,8 @@ def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric =
             est = ev.level(label, stat)
             row |= {f"{stat}_iqm": est.point, f"{stat}_low": est.low, f"{stat}_high": est.high}
         rows[label] = row
-    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("label")
+    columns = ["seeds", "reached"] + [f"{stat}_{part}" for stat in ("steps", "final") for part in ("iqm", "low", "high")]
+    return pd.DataFrame.from_dict(rows, orient="index", columns=columns).rename_axis("label")
 
 
 # --- verdicts -------------------------------------------------------------------------------

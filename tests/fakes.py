@@ -1,4 +1,5 @@
-"""Fake finished runs, written as the run cache holds real ones (every evaluation row of the config)."""
+"""Fake finished runs, written as the run cache holds real ones (every evaluation row of the
+config, with the config's columns)."""
 import numpy as np
 import pandas as pd
 
@@ -11,7 +12,8 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     config's evaluation grid. ``columns`` adds or replaces columns."""
     steps = np.array(cfg.eval_steps)
     value = frac(steps // grid * grid)
-    df = pd.DataFrame({"algo": cfg.algo, "seed": cfg.seed, "iteration": steps // cfg.iteration_steps,
+    config = {k: v for k, v in cfg.flat().items() if v is not None}  # as a real run file holds them
+    df = pd.DataFrame({**config, "iteration": steps // cfg.iteration_steps,
                        "step": steps, "eval_return": value, "frac_opt": value, "eval_success": value,
                        "git_rev": "test", **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))

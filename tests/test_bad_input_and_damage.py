@@ -1,8 +1,10 @@
 """Bad input and damaged files, as a user meets them: every command-line error is one line with
 exit status 2 and no traceback; no damaged file is loaded or loses a result; killed and
 concurrent writers leave nothing behind and train nothing twice."""
+import errno
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -13,11 +15,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import fakes
+
 from oapo_lite import __main__ as cli, grid
-from oapo_lite import experiments, store
+from oapo_lite import experiments, plotting, store, verdicts
 from oapo_lite.executors import train_job
 from oapo_lite.losses import Diverged
-from oapo_lite.config import TrainConfig
+from oapo_lite.config import ALGOS, TrainConfig, readers
 from oapo_lite.runstate import RunState, load_checkpoint
 from oapo_lite.train import _diverged_at, train
 
@@ -51,9 +55,18 @@ def _cli_error(capsys, *argv) -> str:
     (["--n-envs", "0"], ["n_envs = 0", "integer >= 1"]),
     (["--algo", "ppo"], ["ppo", "oappo"]),
     (["--lam", "0.4"], ["--lam was renamed --reuse-lambda"]),
+    (["--algo", "mappo", "--allowed", "NR"], ["--allowed does not apply to --algo mappo", "'oappo', 'oatrpo'"]),
+    (["--algo", "happo", "--sigma", "0.5"], ["--sigma does not apply to --algo happo"]),
+    (["--algo", "oappo", "--cg-iters", "3"], ["--cg-iters does not apply", "'hatrpo', 'oatrpo'"]),
+    (["--algo", "seac", "--lr", "0.1"], ["--lr does not apply to --algo seac"]),
+    (["--lr-ann", "true"], ["unrecognized arguments: --lr-ann"]),  # an abbreviation could name another flag
+    (["--eval-episodes", "10000000000"], ["out of memory", "--eval-episodes"]),
+    (["--hidden", "2000000", "2000000"], ["out of memory", "--hidden"]),
 ])
 def test_a_bad_training_option_is_one_line_naming_it(tmp_path, capsys, argv, words):
-    err = _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path), *argv)
+    a2c = any(algo in argv for algo in ("seac", "seps"))  # their rollout is n_step long: no --rollout-len
+    quick = [a for a in QUICK if a not in ("--rollout-len", "25")] if a2c else QUICK
+    err = _cli_error(capsys, "train", *quick, "--out", str(tmp_path), *argv)
     for word in words:
         assert word in err
 
@@ -311,3 +324,179 @@ def test_a_config_value_of_the_wrong_type_is_named(bad, words):
 def test_numpy_scalars_are_valid_config_values():
     cfg = TrainConfig(steps=np.int64(3200), seed=np.int32(1), reuse_lambda=np.float64(0.5), hidden=(np.int64(32),))
     assert cfg.hidden == (32,) and cfg.n_iterations == 2
+
+
+# ---------------------------------------------------------------- issue 34: values a run cannot honour
+
+
+def test_a_bool_flag_reads_false_as_false(tmp_path, capsys):
+    assert cli.main(["train", *QUICK, "--out", str(tmp_path), "--lr-anneal", "false", "--value-norm", "false"]) == 0
+    rows = pd.read_csv(next(tmp_path.glob("*/results.csv")))
+    assert (rows["lr_anneal"] == False).all() and (rows["value_norm"] == False).all()  # noqa: E712
+
+
+def test_help_exits_0_and_an_unknown_command_names_the_commands(capsys):
+    assert cli.main(["--help"]) == 0 and "python -m oapo_lite train" in capsys.readouterr().out
+    assert cli.main(["trian"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown command 'trian'" in err and "['train', 'reproduce', 'book']" in err
+
+
+@pytest.mark.parametrize("algo", sorted(ALGOS))
+def test_a_config_refuses_a_value_in_a_field_its_algorithm_does_not_read(algo):
+    """Every field of the algorithm-specific groups: a non-default value is refused exactly
+    when ``readers`` does not list the algorithm (on the maze with 2 seats: a 2 x 2 mask)."""
+    changed = dict(sigma=0.5, reuse_lambda=0.4, kl_reduce="mean", reuse_mode="sample", allowed="UR",
+                   reuse_warmup=2, kl_threshold=0.02, cg_iters=3, cg_damping=0.2, line_search_steps=4,
+                   backtrack=0.5, accept_ratio=0.3, n_step=10, a2c_lr=1e-3, a2c_adam_eps=1e-4,
+                   a2c_max_grad_norm=1.0, seac_lambda=0.5, seps_clusters=1, seps_pretrain_steps=30_000)
+    for name, value in changed.items():
+        extra = dict(steps=100_000) if name == "seps_pretrain_steps" else {}
+        if algo in readers(name):
+            TrainConfig(algo=algo, **{name: value}, **extra)
+        else:
+            with pytest.raises(ValueError, match=f"{name} = .* with algo '{algo}'; only .* read it"):
+                TrainConfig(algo=algo, **{name: value}, **extra)
+
+
+@pytest.mark.parametrize("route, max_steps, words", [
+    (100, 50, ["max_steps = 50", "longest shortest route is 100 moves", "max_steps >= 100"]),
+    (150, 200, ["best team return is -0.5", "routes shorter than 100 moves"]),
+])
+def test_a_maze_beyond_the_time_limit_or_without_a_positive_optimum_is_refused(tmp_path, capsys, route, max_steps,
+                                                                                words):
+    row = "#R" + "." * (route - 1) + "*#"
+    path = tmp_path / "corridor.txt"
+    path.write_text(f"agents: red\nstart: 1,1\n{'#' * len(row)}\n{row}\n{'#' * len(row)}\n")
+    err = _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path / "out"), "--env", str(path),
+                     "--max-steps", str(max_steps))
+    assert all(w in err for w in words) and not (tmp_path / "out").exists()  # refused before a run folder
+
+
+# ---------------------------------------------------------------- issue 34: resources
+
+
+def test_resource_errors_name_what_ran_out_and_what_to_do(tmp_path, monkeypatch):
+    from oapo_lite.cli import resource_error
+
+    assert "no space left on the device writing /x/y" in resource_error(OSError(errno.ENOSPC, "full", "/x/y"))
+    assert "out of memory" in resource_error(MemoryError("Unable to allocate 5 TiB"))
+    assert "permission denied" in resource_error(PermissionError(errno.EACCES, "no", "/x"))
+    assert resource_error(ValueError("a bad value")) is None
+    # torch.save on a full disk raises RuntimeError("... unexpected pos ..."): the write names the device
+    monkeypatch.setattr(store.shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(1, 1, 0))
+
+    def torch_on_a_full_disk(tmp):
+        raise RuntimeError("[enforce fail at inline_container.cc:626] . unexpected pos 64 vs 0")
+
+    with pytest.raises(OSError) as caught:
+        store.atomic_write(torch_on_a_full_disk, tmp_path / "checkpoint.pt")
+    assert caught.value.errno == errno.ENOSPC and "no space left" in resource_error(caught.value)
+    assert not list(tmp_path.iterdir())  # no temporary file left behind
+
+
+def test_a_full_disk_is_one_line(tmp_path, capsys):
+    """A real full disk: a 256 KiB tmpfs as the output folder (needs root to mount)."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here (not root)")
+    try:
+        err = _cli_error(capsys, "train", *QUICK, "--out", str(disk), "--hidden", "512", "512")
+        assert "no space left on the device" in err and "--out" in err
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)
+
+
+# ---------------------------------------------------------------- issue 34: an interrupt stops the work
+
+
+@pytest.mark.parametrize("sig, to_group", [(signal.SIGINT, True), (signal.SIGTERM, False)],
+                         ids=["ctrl-c to the process group", "sigterm to the driver"])
+def test_an_interrupted_reproduce_cancels_queued_runs_and_says_how_to_resume(tmp_path, sig, to_group):
+    env = {**os.environ, "OAPO_FIGURES": str(tmp_path)}
+    driver = subprocess.Popen([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", "paper", "--figures",
+                               "fig3b", "--skip-notebooks", "--workers", "2", "--check"],
+                              env=env, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True)
+    started = tmp_path / "data" / "checkpoints"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (started.exists() and len(list(started.iterdir())) >= 2):
+        time.sleep(0.2)
+    time.sleep(2)  # both workers are training
+    (os.killpg if to_group else os.kill)(driver.pid, sig)
+    sent = time.time()
+    _, err = driver.communicate(timeout=60)
+    assert driver.returncode == 130 and time.time() - sent < 30, err
+    assert "run the same command again to resume" in err and "Traceback" not in err
+    assert len(list(started.iterdir())) <= 3 < len(grid.runs_of("fig3b", "paper"))  # the queue never started
+
+
+# ---------------------------------------------------------------- issue 34: notebooks and the library
+
+
+def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path):
+    from oapo_lite.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+
+    with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown notebook parameter\(s\) \['budgte'\]; this "
+                                             r"notebook takes \['budget'\]"):
+        run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budgte": "smoke"})
+
+
+def test_every_notebook_checks_its_parameters_right_after_them():
+    import nbformat
+
+    from oapo_lite.reproduce import NOTEBOOKS
+
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        cells = nbformat.read(path, as_version=4).cells
+        for i, cell in enumerate(cells):
+            if "parameters" in cell.metadata.get("tags", []):
+                names = re.findall(r"^(\w+)\s*=", cell.source, re.M)
+                call = f"check_parameters({', '.join(map(repr, names))})"
+                assert call in cells[i + 1].source.split("\n", 3)[2], (path.name, call)
+
+
+def test_the_run_cache_refuses_another_configs_rows_and_text_in_a_number_column(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    ten, one = (TrainConfig(algo="oappo", sigma=s, **SMALL) for s in (10.0, 1.0))
+    fakes.write_run(ten, "smoke", lambda s: s / 400)
+    experiments.read_run(ten, "smoke")  # whole and its own
+    shutil.copy(experiments.run_path(ten, "smoke"), experiments.run_path(one, "smoke"))
+    with pytest.raises(store.DamagedFile, match=r"another run's rows: its sigma column does not say 1.0"):
+        experiments.read_run(one, "smoke")
+    path = experiments.run_path(ten, "smoke")
+    pd.read_csv(path).assign(eval_return="lots").to_csv(path, index=False)
+    with pytest.raises(store.DamagedFile, match=r"text where its \['eval_return'\] hold numbers"):
+        experiments.read_run(ten, "smoke")
+
+
+def test_reading_results_never_writes(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    for label, cfg in grid.figure_runs("fig1", "smoke"):
+        fakes.write_run(cfg, "smoke", lambda s: s / 400)
+    written = []
+    monkeypatch.setattr(store, "atomic_write", lambda *a: written.append(a))
+    assert len(experiments.load_figure("fig1", "smoke")) and written == []
+    monkeypatch.undo()
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    assert experiments.export_figure("fig1", "smoke") == experiments.data_dir("smoke") / "fig1.csv"
+    assert experiments.export_figure("fig1", "smoke") is None  # unchanged: left alone
+
+
+def test_the_statistics_take_a_frame_with_no_run(tmp_path):
+    empty = pd.DataFrame()
+    assert verdicts.per_run(empty).empty and list(verdicts.per_run(empty).columns) == verdicts.PER_RUN_COLUMNS
+    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty
+    assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
+    assert np.isnan(verdicts.probability_of_improvement([np.nan, np.nan], [1, 2]))
+    assert verdicts.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
+
+
+@pytest.mark.parametrize("args, words", [
+    (("oappo", "runs"), "cfg must be a TrainConfig, got str"),
+    ((TrainConfig(), None), "out_dir must be a folder path (str or Path), got NoneType"),
+])
+def test_train_names_an_argument_of_the_wrong_kind(args, words):
+    with pytest.raises(TypeError, match=re.escape(words)):
+        train(*args)

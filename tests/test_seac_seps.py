@@ -190,6 +190,12 @@ RING = dict(algo="seps", env_fn=Ring, n_envs=8, steps=40 * 30, seps_pretrain_ste
 RING_VAE = {**RING, "steps": 40 * 105, "seps_pretrain_steps": 40 * 100, "eval_every": 50}
 
 
+def for_algo(algo: str, /, **fields) -> dict:
+    """``fields`` with ``algo``, less SePS's own fields for SEAC (a config refuses a value in a
+    field its algorithm does not read)."""
+    return {**{k: v for k, v in fields.items() if algo == "seps" or not k.startswith("seps_")}, "algo": algo}
+
+
 def test_seps_groups_two_identical_agents_and_keeps_two_different_ones_apart(tmp_path):
     """Agents a and b move differently from each other and from the identical c0, c1: the
     Davies-Bouldin choice (k in 2..3) is k = 3, the c's share a network."""
@@ -235,7 +241,7 @@ def test_seps_with_one_group_is_parameter_sharing_and_with_n_groups_no_sharing(t
 @pytest.mark.parametrize("algo, crash_at", [("seac", 7), ("seps", 7), ("seps", 23)])
 def test_resuming_seac_and_seps_gives_the_uninterrupted_numbers(tmp_path, algo, crash_at):
     """Crashes before and after SePS's switch (iteration 20); checkpoints every 5 iterations."""
-    cfg = TrainConfig(**{**RING, "algo": algo, "checkpoint_every": 5})
+    cfg = TrainConfig(**for_algo(algo, **RING, checkpoint_every=5))
     full = train(cfg, tmp_path / "full", resume=False, progress=False)
 
     def crash(metrics):
@@ -253,11 +259,11 @@ def test_resuming_seac_and_seps_gives_the_uninterrupted_numbers(tmp_path, algo, 
 
 @pytest.mark.parametrize("algo", ["seac", "seps"])
 def test_box_actions_train_and_different_spaces_raise(tmp_path, algo):
-    rows = train(TrainConfig(**{**RING, "algo": algo, "env_fn": lambda: Ring(continuous=True)}), tmp_path / "box",
+    rows = train(TrainConfig(**for_algo(algo, **{**RING, "env_fn": lambda: Ring(continuous=True)})), tmp_path / "box",
                  resume=False, progress=False)
     assert np.isfinite(rows["eval_return"]).all()
     with pytest.raises(ValueError, match=r"reuse between agents 'a0' and 'b0' needs equal spaces"):
-        train(TrainConfig(**{**RING, "algo": algo, "env_fn": lambda: Ring(obs_dims=[6, 7, 6, 7])}),
+        train(TrainConfig(**for_algo(algo, **{**RING, "env_fn": lambda: Ring(obs_dims=[6, 7, 6, 7])})),
               tmp_path / "bad", resume=False, progress=False)
 
 
@@ -269,7 +275,7 @@ def test_box_actions_train_and_different_spaces_raise(tmp_path, algo):
 ])
 def test_bad_seac_seps_values_raise_naming_the_value(bad, words):
     with pytest.raises(ValueError) as err:
-        TrainConfig(**{**RING, **bad})
+        TrainConfig(**for_algo(bad["algo"], **{**RING, **bad}))
     for word in words:
         assert word in str(err.value)
 
@@ -281,16 +287,16 @@ def test_bad_seac_seps_values_raise_naming_the_value(bad, words):
 ])
 def test_settings_seac_and_seps_cannot_use_raise_at_the_start(tmp_path, bad, words):
     with pytest.raises(ValueError) as err:
-        train(TrainConfig(**{**RING, **bad}), tmp_path, resume=False, progress=False)
+        train(TrainConfig(**for_algo(bad["algo"], **{**RING, **bad})), tmp_path, resume=False, progress=False)
     for word in words:
         assert word in str(err.value)
 
 
 def test_the_cli_trains_seac_and_seps_on_a_maze(tmp_path, capsys):
     for algo in ("seac", "seps"):
-        assert cli.main(["train", "--algo", algo, "--env", "black_red", "--n-envs", "8", "--steps", "800",
-                         "--seps-pretrain-steps", "400", "--seps-clusters", "none", "--out", str(tmp_path),
-                         "--no-progress"]) == 0
+        seps = ["--seps-pretrain-steps", "400", "--seps-clusters", "none"] if algo == "seps" else []
+        assert cli.main(["train", "--algo", algo, "--env", "black_red", "--n-envs", "8", "--steps", "800", *seps,
+                         "--out", str(tmp_path), "--no-progress"]) == 0
         assert f"{algo} on black_red, seed 0: 800 env steps" in capsys.readouterr().out
     (seps_run,) = tmp_path.glob("seps-black_red-s0-*")
     rows = __import__("pandas").read_csv(seps_run / "results.csv")
@@ -301,8 +307,9 @@ def test_the_cli_trains_seac_and_seps_on_a_maze(tmp_path, capsys):
 def test_action_masks_are_respected(tmp_path, algo):
     from test_train import Toy  # asserts that no masked action is ever sent
 
-    rows = train(TrainConfig(algo=algo, env_fn=lambda: Toy(masked="obs"), n_envs=4, steps=400, seps_pretrain_steps=200,
-                             eval_every=5, eval_episodes=2), tmp_path, resume=False, progress=False)
+    rows = train(TrainConfig(**for_algo(algo, env_fn=lambda: Toy(masked="obs"), n_envs=4, steps=400,
+                                        seps_pretrain_steps=200, eval_every=5, eval_episodes=2)),
+                 tmp_path, resume=False, progress=False)
     assert np.isfinite(rows["eval_return"]).all()
 
 
@@ -312,7 +319,8 @@ def test_a2c_learns_the_corridor(tmp_path, algo):
     family (which reaches 95% in 4,800 steps): 24,000 steps take it from ~0.06 to >= 0.7."""
     from test_train import CORRIDOR
 
-    rows = train(TrainConfig(algo=algo, env=CORRIDOR, n_envs=16, max_steps=10, steps=80 * 300, eval_every=30,
-                             eval_episodes=16, seps_pretrain_steps=80 * 50), tmp_path, resume=False, progress=False)
+    rows = train(TrainConfig(**for_algo(algo, env=CORRIDOR, n_envs=16, max_steps=10, steps=80 * 300, eval_every=30,
+                                        eval_episodes=16, seps_pretrain_steps=80 * 50)),
+                 tmp_path, resume=False, progress=False)
     assert rows["frac_opt"].iloc[0] < 0.2
     assert rows["frac_opt"].iloc[-5:].max() >= 0.7

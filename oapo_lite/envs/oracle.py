@@ -82,6 +82,20 @@ def optimal_return(maze: Maze, gamma: float = 1.0) -> float:
     return float(np.mean(gamma ** (d - 1.0) - STEP_COST * costs))
 
 
+def check_fits(maze: Maze, max_steps: int) -> None:
+    """Raise ``ValueError`` unless every seat can reach the star within ``max_steps`` and the
+    best team return is positive (so that a fraction of it, ``frac_opt``, means something)."""
+    d = distances(maze)[np.arange(maze.n_agents), list(maze.starts)]
+    longest = int(d.max())
+    if longest > max_steps:
+        raise ValueError(f"max_steps = {max_steps} is invalid for maze {maze.name!r}: its longest shortest route "
+                         f"is {longest} moves; allowed: max_steps >= {longest}")
+    if optimal_return(maze) <= 0:
+        raise ValueError(f"maze {maze.name!r} is invalid: its best team return is {optimal_return(maze):.3g} <= 0 "
+                         f"(each route of d moves earns 1 - {STEP_COST:g} d), so a fraction of the optimum means "
+                         f"nothing; allowed: routes shorter than {round(1 / STEP_COST)} moves")
+
+
 def conflict_cells(maze: Maze, k: int, l: int) -> list[int]:
     """Cells (not the star) where seats k and l may both stand but share no optimal action.
 

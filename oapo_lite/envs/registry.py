@@ -51,6 +51,16 @@ def check(spec: str) -> None:
         _engine(prefix).check(name)
 
 
+def maze_of(spec: str):
+    """The ``Maze`` behind a maze env (built-in, map text or generated layout), else None."""
+    prefix, name = split(spec)
+    if prefix is None:
+        return load_maze(name)
+    if prefix == "layout":
+        return _engine(prefix).load_layout(name)
+    return None
+
+
 def make_vec(spec: str, n_envs: int, seed: int, max_steps: int):
     prefix, name = split(spec)
     if prefix is None:
