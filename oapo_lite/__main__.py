@@ -73,6 +73,8 @@ def train_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="runs", help="parent folder of the run folder")
     parser.add_argument("--no-resume", action="store_true", help="start afresh even if a checkpoint exists")
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--tensorboard", metavar="FOLDER", default=None,
+                        help="also write the live diagnostics as TensorBoard scalars there (tensorboard --logdir FOLDER)")
     return parser
 
 
@@ -98,6 +100,7 @@ def train_main(argv: list[str]) -> int:
     args = vars(parser.parse_args(argv))
     _refuse_ignored(parser, argv, args["algo"])
     out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")
+    tensorboard = args.pop("tensorboard")
     name, file_name = args["env"], None
     if name not in MAPS and Path(name).is_file():
         path = Path(name)
@@ -111,7 +114,7 @@ def train_main(argv: list[str]) -> int:
     run_dir = out / run_id(cfg, file_name)
     print(f"run folder: {run_dir}", flush=True)
     start = time.perf_counter()
-    rows = train(cfg, run_dir, resume=resume, progress=progress)
+    rows = train(cfg, run_dir, resume=resume, progress=progress, tensorboard=tensorboard)
     wall = time.perf_counter() - start
     last = rows.iloc[-1]
     hit = rows.loc[rows["frac_opt"] >= 0.95, "step"]

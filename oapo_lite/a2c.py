@@ -26,7 +26,7 @@ from torch import nn
 
 from oapo_lite import reuse, seps
 from oapo_lite.adam import Adam
-from oapo_lite.losses import check_finite, source_mean
+from oapo_lite.losses import check_finite, explained_variance, source_mean, update_diagnostics
 from oapo_lite.nets import Actors, Critic
 
 log = logging.getLogger(__name__)
@@ -103,8 +103,9 @@ class A2C:
         R = nstep_returns(batch.reward[:, None], done, last, self.gamma)  # (T, n, N)
         return R.transpose(0, 1).reshape(len(owner), -1)
 
-    def learn(self, batch, next_obs: torch.Tensor, owner: list[int]) -> dict:
-        """One A2C step of every network that controls a seat, on ``batch`` (a ``train.Rollout``)."""
+    def learn(self, batch, next_obs: torch.Tensor, owner: list[int]) -> tuple[dict, list]:
+        """One A2C step of every network that controls a seat, on ``batch`` (a ``train.Rollout``):
+        (metrics, ``diagnostics``)."""
         inputs, head = batch.inputs, self.actors.head
         returns = self.returns(batch, next_obs, owner)
         check_finite(returns, "the n-step returns", "all: they share the team reward")
@@ -129,8 +130,25 @@ class A2C:
         others = [p["weights"][[c != net for c in owner]] for p, net in zip(parts, nets)]
         others = torch.cat([w.reshape(-1) for w in others])
         mean = (lambda key: float(sum(p[key].detach() for p in parts) / k))
-        return {"policy_loss": mean("policy"), "value_loss": mean("value"), "entropy": mean("entropy"),
-                "seac_weight": float(others.mean()) if self.seac_lambda > 0 and others.numel() else float("nan")}
+        metrics = {"policy_loss": mean("policy"), "value_loss": mean("value"), "entropy": mean("entropy"),
+                   "seac_weight": float(others.mean()) if self.seac_lambda > 0 and others.numel() else float("nan")}
+        return metrics, self.diagnostics(batch, returns, v.detach(), nets, owner)
+
+    def diagnostics(self, batch, returns: torch.Tensor, v: torch.Tensor, nets: list[int], owner: list[int]) -> list:
+        """Per network, on its own seats' samples: the update's approximate KL and the updated
+        policy's entropy (``losses.update_diagnostics``; A2C has no clip), and the explained
+        variance of its critic before the step."""
+        inputs, head, k, U = batch.inputs, self.actors.head, len(nets), batch.inputs.obs.shape[0]
+        with torch.no_grad():
+            d = self.actors(inputs.obs.expand(k, U, -1), nets, inputs.avail.expand(k, U, -1))[:, inputs.index]
+        learners = []
+        for row, net in enumerate(nets):
+            own = [s for s, c in enumerate(owner) if c == net]
+            active = None if batch.active is None else batch.active[own]
+            learners.append({"net": net, "seats": own, **update_diagnostics(
+                head.log_prob(d[row][own], batch.act[own]), batch.logp[own], head.entropy(d[row][own]), active, None),
+                "explained_variance": explained_variance(v[row][own].reshape(-1), returns[own].reshape(-1))})
+        return learners
 
     def copy_net(self, src: int, dst: int) -> None:
         """Network ``dst`` becomes a copy of ``src``: actor, critic and Adam state."""
@@ -175,16 +193,16 @@ class Learner:
 
     def learn(self, batch, step, it: int) -> tuple[dict, dict]:
         """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout.
-        Returns (metrics for the results rows, nothing more for the history)."""
+        Returns (metrics for the results rows, the live diagnostics of each network for the history)."""
         next_obs = torch.from_numpy(step.obs)
         if self.buffer is not None:
             self._record(batch, next_obs)
-        metrics = self.a2c.learn(batch, next_obs, self.owner)
+        metrics, learners = self.a2c.learn(batch, next_obs, self.owner)
         if self.buffer is not None and it + 1 == self.pretrain_iters:
             self._regroup()
         returns = batch.episode_returns
         metrics = {"train_return": sum(returns) / len(returns) if returns else float("nan"), **metrics}
-        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), {}
+        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), {"learners": learners}
 
     def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
         """Every optimiser with its learning rate before annealing."""

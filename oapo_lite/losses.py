@@ -99,3 +99,23 @@ def check_finite(x: torch.Tensor | np.ndarray | float, quantity: str, net: int |
     """Raise ``Diverged`` naming the quantity and the net being updated if ``x`` holds a NaN or an inf."""
     if not torch.isfinite(torch.as_tensor(x)).all():
         raise Diverged(quantity, net)
+
+
+def update_diagnostics(logp_new: torch.Tensor, logp_old: torch.Tensor, entropy: torch.Tensor,
+                       active: torch.Tensor | None, clip: float | None) -> dict:
+    """What users of PPO code watch after a learner's update, on its own seats' samples (as
+    CleanRL's ppo.py): the approximate KL of the update E[(r - 1) - log r] with r = pi_new /
+    pi_old (never negative), the share of samples whose ratio left [1 - clip, 1 + clip] (NaN
+    for a trust-region step, which has no clip), and the entropy of the updated policy."""
+    log_ratio = (logp_new - logp_old).reshape(-1)
+    ratio, active = log_ratio.exp(), None if active is None else active.reshape(-1)
+    clip_frac = np.nan if clip is None else source_mean(((ratio - 1).abs() > clip).float(), active).item()
+    return {"approx_kl": source_mean((ratio - 1) - log_ratio, active).item(), "clip_frac": clip_frac,
+            "entropy": source_mean(entropy.reshape(-1), active).item()}
+
+
+def explained_variance(predicted: torch.Tensor, target: torch.Tensor) -> float:
+    """1 - Var(target - predicted) / Var(target): 1 for a critic that predicts every return, 0
+    for one that predicts their mean, below 0 for worse (NaN for constant targets)."""
+    var = target.var()
+    return float("nan") if var == 0 else (1 - (target - predicted).var() / var).item()

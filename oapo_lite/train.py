@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from oapo_lite.board import Board
 from oapo_lite.config import TrainConfig
 from oapo_lite.losses import Diverged
 from oapo_lite.rollout import collect, episode_scores
@@ -31,7 +32,8 @@ from oapo_lite.store import Lock
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
-          callback: Callable[[dict], None] | None = None, timing: dict | None = None) -> pd.DataFrame:
+          callback: Callable[[dict], None] | None = None, timing: dict | None = None,
+          tensorboard: str | Path | None = None) -> pd.DataFrame:
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
     ``results.csv`` is written with every checkpoint. With ``resume``, continue from
@@ -39,7 +41,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     is then identical to an uninterrupted run. ``callback(metrics)`` is called after every
     iteration. A ``timing`` dict is filled with the seconds spent in env stepping, policy
     forwards during rollouts, learning and evaluation (for the benchmarks). The per-iteration
-    metrics are in the checkpoint: ``runstate.load_history(out_dir)``.
+    metrics are in the checkpoint: ``runstate.load_history(out_dir)``, with each learner's
+    diagnostics (approximate KL, clip fraction, entropy), the critic's explained variance and
+    every seat's peer share; ``tensorboard`` (a folder) also writes them as TensorBoard
+    scalars while the run trains (``board.py``).
     """
     if not isinstance(cfg, TrainConfig):
         raise TypeError(f"train's cfg must be a TrainConfig, got {type(cfg).__name__} {cfg!r}; "
@@ -60,7 +65,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores
     try:
-        return _train(cfg, out, resume, progress, callback, {} if timing is None else timing)
+        return _train(cfg, out, resume, progress, callback, {} if timing is None else timing, tensorboard)
     finally:
         torch.set_num_threads(threads)
         lock.release()
@@ -105,7 +110,8 @@ def iterations_reusing(history: list[dict]) -> float:
     return float(np.mean([h["peer_share"] > 0 for h in history]))
 
 
-def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, clock: dict) -> pd.DataFrame:
+def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, clock: dict,
+           tensorboard: str | Path | None) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
     state, revision = RunState.start(cfg), git_revision()
@@ -113,28 +119,37 @@ def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, 
         state.load_state_dict(load_checkpoint(out))
         save_results(state.rows, out)  # a results.csv deleted or damaged after the checkpoint comes back
     clock.update(env=0.0, policy=0.0, learn=0.0, eval=0.0)
+    board = None if tensorboard is None else Board(tensorboard, state.env.agents)
 
     def evaluate_now(metrics: dict) -> None:
         tic = time.perf_counter()
         state.rows.append(evaluation_row(state, metrics, revision))
         clock["eval"] += time.perf_counter() - tic
+        if board is not None:
+            board.evaluation(state.rows[-1])
 
-    if state.iteration == 0:
-        evaluate_now({})
-    for _ in tqdm(range(state.iteration, cfg.n_iterations), initial=state.iteration, total=cfg.n_iterations,
-                  desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True):
-        try:
-            metrics = iterate(state, clock)
-        except Diverged as err:
-            raise _diverged_at(err, state, out) from None
-        if cfg.evaluates(state.iteration):
-            evaluate_now(metrics)
-        if state.iteration % cfg.checkpoint_every == 0 or state.iteration == cfg.n_iterations:
-            # results.csv goes with the checkpoint, so the two always agree (and rewriting the
-            # growing CSV at every evaluation cost a tenth of a paper-budget run)
-            state.save(out)
-        if callback is not None:
-            callback(state.history[-1])
+    try:
+        if state.iteration == 0:
+            evaluate_now({})
+        for _ in tqdm(range(state.iteration, cfg.n_iterations), initial=state.iteration, total=cfg.n_iterations,
+                      desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True):
+            try:
+                metrics = iterate(state, clock)
+            except Diverged as err:
+                raise _diverged_at(err, state, out) from None
+            if cfg.evaluates(state.iteration):
+                evaluate_now(metrics)
+            if state.iteration % cfg.checkpoint_every == 0 or state.iteration == cfg.n_iterations:
+                # results.csv goes with the checkpoint, so the two always agree (and rewriting the
+                # growing CSV at every evaluation cost a tenth of a paper-budget run)
+                state.save(out)
+            if board is not None:
+                board.iteration(state.history[-1])
+            if callback is not None:
+                callback(state.history[-1])
+    finally:
+        if board is not None:
+            board.close()
     return pd.DataFrame(state.rows)
 
 

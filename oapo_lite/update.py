@@ -14,8 +14,8 @@ import torch
 from oapo_lite import adaptive, reuse
 from oapo_lite.adam import Adam
 from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
-from oapo_lite.losses import (Diverged, check_finite, gae, normalise, off_agent_objective, source_mean,
-                              update_factor, value_loss, weighted_kl)
+from oapo_lite.losses import (Diverged, check_finite, explained_variance, gae, normalise, off_agent_objective,
+                              source_mean, update_diagnostics, update_factor, value_loss, weighted_kl)
 from oapo_lite.nets import Actors, Critic, ValueNorm, owners
 from oapo_lite.rollout import Inputs, Rollout, States, mean_or_nan
 from oapo_lite.trpo import trpo_step
@@ -236,7 +236,7 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, units: list, order
     algorithms the factor rho collects the own-seat ratio of every update already made.
     Returns (final factor, surrogates, accepted KLs)."""
     factor = torch.ones(adv.shape[0])
-    objectives, trpo_kls = [], []
+    objectives, trpo_kls, learners = [], [], []
     for u in order:
         src = Sources.of(*units[u], batch)
         if spec.trust_region:
@@ -245,13 +245,17 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, units: list, order
         else:
             objective = ppo_update(actors, opts[src.net], batch.inputs, src, factor, adv, cfg, rng)
         objectives.append(objective)
+        with torch.no_grad():
+            d_new = learner_dists(actors, batch.inputs, src)[src.own]
+            logp_new, active = actors.head.log_prob(d_new, src.act[src.own]), None if src.active is None else src.active[src.own]
+            learners.append({"net": src.net, "seats": [src.rows[k] for k in src.own],
+                             **update_diagnostics(logp_new, src.logp_old[src.own], actors.head.entropy(d_new), active,
+                                                  None if spec.trust_region else cfg.clip)})
+            if spec.sequential:
+                factor = update_factor(factor, logp_new, src.logp_old[src.own], active)
         if spec.sequential:
-            with torch.no_grad():
-                d_new = learner_dists(actors, batch.inputs, src)[src.own]
-                factor = update_factor(factor, actors.head.log_prob(d_new, src.act[src.own]), src.logp_old[src.own],
-                                       None if src.active is None else src.active[src.own])
             check_finite(factor, "the sequential factor rho", src.net)
-    return factor, objectives, trpo_kls
+    return factor, objectives, trpo_kls, learners
 
 
 def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueNorm, states: States,
@@ -317,7 +321,9 @@ class Learner:
         W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, self.rng)]
         units = update_units(W, self.owner, cfg.update_by)
         order = reuse.update_order(len(units), self.rng) if spec.sequential else range(len(units))
-        _, objectives, trpo_kls = update_actors(actors, self.actor_opts, batch, units, order, adv, spec, cfg, self.rng)
+        _, objectives, trpo_kls, learners = update_actors(actors, self.actor_opts, batch, units, order, adv, spec, cfg,
+                                                          self.rng)
+        explained = explained_variance(self.value_norm.denormalize(v_old), returns)  # the critic before its update
         critic_loss = update_critic(self.critic, self.critic_opt, self.value_norm, batch.states, v_old, returns, cfg,
                                     self.rng)
         accepted = [k for k in trpo_kls if not math.isnan(k)]
@@ -331,7 +337,10 @@ class Learner:
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
             metrics["agreement"] = np.round(C, 6)
-        return metrics, {"trpo_kls": trpo_kls}
+        # the live diagnostics (history only: the results rows keep their columns)
+        peer = (1 - np.diag(M)).round(6).tolist()
+        return metrics, {"trpo_kls": trpo_kls, "learners": learners, "explained_variance": explained,
+                         "peer_shares": peer}
 
     def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
         """Every optimiser with its learning rate before annealing."""

@@ -280,7 +280,7 @@ def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
     batch, _ = collect(env, env.reset(), actors, [0, 1, 2], cfg.rollout_len, torch.Generator().manual_seed(1))
     W = np.full((3, 3), 1 / 3)
     adv = torch.randn(batch.act.shape[1], generator=torch.Generator().manual_seed(2))
-    factor, _, _ = update_actors(actors, opts, batch, update_units(W, [0, 1, 2], "net"), [2, 0, 1], adv, ALGOS[algo],
+    factor, _, _, _ = update_actors(actors, opts, batch, update_units(W, [0, 1, 2], "net"), [2, 0, 1], adv, ALGOS[algo],
                                  cfg, np.random.default_rng(0))
     explicit = torch.ones_like(factor)
     with torch.no_grad():
@@ -324,7 +324,7 @@ def test_sample_mode_oatrpo_keeps_the_acting_policy_within_delta_on_its_own_obse
     old = copy.deepcopy(actors)
     W = np.array([[0.0, 1.0], [1.0, 0.0]])
     adv = torch.randn(64, generator=torch.Generator().manual_seed(2))
-    _, _, kls = update_actors(actors, [], batch, update_units(W, [0, 1], "net"), [0, 1], adv, ALGOS["oatrpo"],
+    _, _, kls, _ = update_actors(actors, [], batch, update_units(W, [0, 1], "net"), [0, 1], adv, ALGOS["oatrpo"],
                               TrainConfig(algo="oatrpo", kl_threshold=delta), np.random.default_rng(0))
     assert not any(math.isnan(k) for k in kls)  # both steps were taken
     with torch.no_grad():
@@ -616,3 +616,66 @@ def test_feature_norm_trains_its_layernorms_and_resumes_to_the_uninterrupted_num
     params = _params(tmp_path, "full")
     assert not torch.equal(params["norms.0.0"], torch.ones_like(params["norms.0.0"]))
     assert load_checkpoint(tmp_path / "full")["critic"]["net.0.weight"].ndim == 1  # the critic's LayerNorm comes first
+
+
+# ---------------------------------------------------------------- live diagnostics (issue 34)
+
+
+def test_update_diagnostics_match_their_closed_forms():
+    from oapo_lite.losses import explained_variance, update_diagnostics
+
+    logp_old = torch.log(torch.tensor([0.5, 0.2, 0.4, 0.1]))
+    ratio = np.array([1.5, 0.9, 1.0, 0.7])
+    logp_new = logp_old + torch.log(torch.tensor(ratio, dtype=torch.float32))
+    entropy = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    d = update_diagnostics(logp_new, logp_old, entropy, None, clip=0.2)
+    assert d["approx_kl"] == pytest.approx(np.mean((ratio - 1) - np.log(ratio)), rel=1e-5)
+    assert d["clip_frac"] == 0.5 and d["entropy"] == 2.5  # 1.5 and 0.7 leave [0.8, 1.2]
+    unchanged = update_diagnostics(logp_old, logp_old, entropy, torch.tensor([True, True, False, False]), None)
+    assert unchanged["approx_kl"] == 0 and np.isnan(unchanged["clip_frac"]) and unchanged["entropy"] == 1.5
+    target = torch.tensor([1.0, 2.0, 4.0, 7.0])
+    assert explained_variance(target, target) == 1.0
+    assert explained_variance(torch.full((4,), target.mean().item()), target) == pytest.approx(0.0, abs=1e-6)
+    assert np.isnan(explained_variance(target, torch.ones(4)))
+
+
+@pytest.mark.parametrize("algo", ["oappo", "oatrpo", "mappo", "seac"])
+def test_the_history_carries_each_learners_diagnostics(tmp_path, algo):
+    from oapo_lite.runstate import load_history
+
+    cfg = TrainConfig(algo=algo, env="black_red", n_envs=8, steps=1600, eval_every=2, eval_episodes=4,
+                      **({} if ALGOS[algo].a2c else dict(rollout_len=25)))
+    rows = train(cfg, tmp_path, resume=False, progress=False)
+    history = load_history(tmp_path)
+    assert len(history) == cfg.n_iterations
+    for entry in history:
+        nets = sorted(learner["net"] for learner in entry["learners"])
+        assert nets == sorted(set(nets)) and len(nets) == (1 if algo == "mappo" else 2)
+        for learner in entry["learners"]:
+            assert learner["approx_kl"] >= 0 and 0 <= learner["entropy"] <= np.log(5) + 1e-6
+            assert np.isnan(learner["clip_frac"]) if algo in ("oatrpo", "seac") else 0 <= learner["clip_frac"] <= 1
+        if not ALGOS[algo].a2c:
+            assert entry["explained_variance"] <= 1
+            assert entry["peer_shares"] == pytest.approx((1 - np.diag(entry["reuse_matrix"])).tolist(), abs=1e-6)
+    assert "learners" not in rows.columns  # the results rows keep their columns
+
+
+def test_tensorboard_scalars_are_the_history_and_change_no_number(tmp_path):
+    pytest.importorskip("tensorboard")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from oapo_lite.runstate import load_history
+
+    cfg = TrainConfig(algo="oappo", env="black_red", n_envs=8, rollout_len=25, steps=1600, eval_every=2,
+                      eval_episodes=4)
+    plain = train(cfg, tmp_path / "plain", resume=False, progress=False)
+    watched = train(cfg, tmp_path / "watched", resume=False, progress=False, tensorboard=tmp_path / "tb")
+    assert plain.drop(columns="git_rev").equals(watched.drop(columns="git_rev"))
+    events = EventAccumulator(str(tmp_path / "tb"))
+    events.Reload()
+    history = load_history(tmp_path / "watched")
+    kl = {e.step: e.value for e in events.Scalars("learner 0/approx_kl")}
+    assert kl == pytest.approx({h["step"]: next(x["approx_kl"] for x in h["learners"] if x["net"] == 0)
+                                for h in history}, rel=1e-6)
+    assert [e.step for e in events.Scalars("evaluation/frac_opt")] == watched["step"].tolist()
+    assert {"peer share/red", "peer share/black", "critic/explained_variance"} <= set(events.Tags()["scalars"])
