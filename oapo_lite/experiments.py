@@ -238,8 +238,8 @@ def export_figure(figure, budget: str) -> Path | None:
     run of it is on disk; the writer of the run cache does this, so that reading never writes.
     An unchanged file is left alone. Returns the path written, or None."""
     name = getattr(figure, "id", figure)
-    if name not in grid.FIGURES or missing_runs(name, budget):
-        return None
+    if name not in grid.FIGURES or not runs_of(name, budget) or missing_runs(name, budget):
+        return None  # not a grid figure, no runs at this budget, or not all of them yet
     df, _ = read_figure(name, budget)
     path = data_dir(budget) / f"{name}.csv"
     old = path.read_bytes() if path.exists() else None
