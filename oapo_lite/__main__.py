@@ -78,30 +78,57 @@ def train_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _refuse_ignored(parser: argparse.ArgumentParser, argv: list[str], algo: str) -> None:
-    """A flag given for a field the algorithm does not read is an error, not a silent no-op."""
+def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: dict) -> None:
+    """What the run could not honour is an error, not a silent no-op: a flag given twice (the
+    first value would be dropped), a flag for a field the algorithm does not read, steps that
+    are not whole iterations (the run would train fewer), an unusable TensorBoard folder."""
     from oapo_lite.config import ALGOS, readers
+    from oapo_lite.store import cannot_write
 
-    if algo not in ALGOS:
-        return  # TrainConfig names the algorithms
     for action in parser._actions:
-        given = any(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in argv)
-        if given and algo not in readers(action.dest):
-            parser.error(f"{action.option_strings[0]} does not apply to --algo {algo}; only {readers(action.dest)} "
-                         "read it")
+        given = sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in argv)
+        if given > 1:
+            parser.error(f"{action.option_strings[0]} is given {given} times; give it once")
+        if given and args["algo"] in ALGOS and args["algo"] not in readers(action.dest):
+            parser.error(f"{action.option_strings[0]} does not apply to --algo {args['algo']}; only "
+                         f"{readers(action.dest)} read it")
+    if args["algo"] in ALGOS and isinstance(args["steps"], int):
+        a2c = ALGOS[args["algo"]].a2c
+        per = args["n_envs"] * (args["n_step"] if a2c else args["rollout_len"])
+        if per > 0 and args["steps"] % per:
+            below, above = args["steps"] // per * per, (args["steps"] // per + 1) * per
+            parser.error(f"--steps {args['steps']} is not a whole number of iterations of n_envs x "
+                         f"{'n_step' if a2c else 'rollout_len'} = {per} env steps; allowed: a multiple of {per}, "
+                         f"e.g. {below or above} or {above}")
+    board = args.get("tensorboard")
+    if board is not None:
+        folder = Path(board)
+        if not board.strip() or folder.exists() and not folder.is_dir():
+            parser.error(f"--tensorboard {board!r} is not a folder; allowed: a folder to write the scalars into")
+        why = cannot_write(folder)
+        if why:
+            parser.error(f"--tensorboard {board!r} cannot be written ({why}); choose another folder")
 
 
 def train_main(argv: list[str]) -> int:
+    import pandas as pd
+
     from oapo_lite.config import TrainConfig
     from oapo_lite.experiments import run_id
     from oapo_lite.train import train
 
     parser = train_parser()
     args = vars(parser.parse_args(argv))
-    _refuse_ignored(parser, argv, args["algo"])
+    _refuse_unhonoured(parser, argv, args)
     out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")
     tensorboard = args.pop("tensorboard")
     name, file_name = args["env"], None
+    if name not in MAPS and Path(name).is_dir():
+        raise ValueError(f"--env {name!r} is a folder; allowed: a built-in map {sorted(MAPS)}, a map file or "
+                         "<engine>:<name>")
+    if name not in MAPS and ":" not in name and ("/" in name or name.endswith(".txt")) and not Path(name).exists():
+        raise ValueError(f"--env {name!r}: no such map file; allowed: a built-in map {sorted(MAPS)}, a map file or "
+                         "<engine>:<name>")
     if name not in MAPS and Path(name).is_file():
         path = Path(name)
         try:
@@ -120,9 +147,12 @@ def train_main(argv: list[str]) -> int:
     hit = rows.loc[rows["frac_opt"] >= 0.95, "step"]
     has_optimum = rows["frac_opt"].notna().any()  # only the mazes have an oracle
     print(f"{cfg.algo} on {name}, seed {cfg.seed}: {int(last['step'])} env steps in {wall:.1f} s")
-    print(f"  final evaluation: return {last['eval_return']:.3f}, "
-          + (f"{last['frac_opt']:.1%} of the optimum, " if has_optimum else "")
-          + f"success {last['eval_success']:.0%}")
+    parts = [f"return {last['eval_return']:.3f}"]
+    if has_optimum:
+        parts.append(f"{last['frac_opt']:.1%} of the optimum")
+    if pd.notna(last["eval_success"]):  # NaN: the env has no success rule (MaMuJoCo)
+        parts.append(f"success {last['eval_success']:.0%}")
+    print(f"  final evaluation: {', '.join(parts)}")
     if has_optimum:
         print(f"  95% of the optimum first reached at: {f'{int(hit.iloc[0])} env steps' if len(hit) else 'never'}")
     print(f"  results: {run_dir / 'results.csv'}")
@@ -148,9 +178,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     debug = cli.debug_requested(argv)
     argv = [a for a in argv if a != "--debug"]
-    if not argv or argv[0] in ("-h", "--help"):
+    if argv and argv[0] in ("-h", "--help"):
         print(__doc__.strip())
-        return 0 if argv else 2
+        return 0
+    if not argv:
+        print(f"error: no command given; the commands are {list(COMMANDS)} (python -m oapo_lite --help)",
+              file=sys.stderr)
+        return 2
     if argv[0] not in COMMANDS:
         print(f"error: unknown command {argv[0]!r}; the commands are {list(COMMANDS)} (python -m oapo_lite --help)",
               file=sys.stderr)

@@ -31,7 +31,8 @@ OUT_OF_MEMORY = re.compile(r"can't allocate memory|not enough memory|out of memo
 RESOURCES = {
     errno.ENOSPC: "no space left on the device{where}; free some space or write elsewhere (--out, OAPO_FIGURES)",
     errno.EDQUOT: "disk quota exceeded{where}; free some space or write elsewhere (--out, OAPO_FIGURES)",
-    errno.EACCES: "permission denied{where}; write elsewhere (--out, OAPO_FIGURES) or fix the folder's permissions",
+    errno.EACCES: "permission denied{where}; fix its permissions, or write elsewhere (--out, OAPO_FIGURES)",
+    errno.EPERM: "operation not permitted{where}; fix its permissions, or write elsewhere (--out, OAPO_FIGURES)",
     errno.EROFS: "read-only file system{where}; write elsewhere (--out, OAPO_FIGURES)",
 }
 
@@ -43,7 +44,7 @@ def resource_error(err: BaseException) -> str | None:
         return (f"out of memory ({detail or 'MemoryError'}); lower the sizes that scale it (--n-envs, "
                 "--eval-episodes, --hidden, --workers) or free memory")
     if isinstance(err, OSError) and err.errno in RESOURCES:
-        return RESOURCES[err.errno].format(where=f" writing {err.filename}" if err.filename else "")
+        return RESOURCES[err.errno].format(where=f": {err.filename}" if err.filename else "")
     return None
 
 

@@ -18,6 +18,7 @@ import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from oapo_lite.cli import resource_error
 from oapo_lite.store import DamagedFile
 from oapo_lite.runstate import git_revision
 from oapo_lite.train import train
@@ -28,16 +29,21 @@ PACKAGE = Path(__file__).resolve().parent
 def train_job(cfg, checkpoints: str):
     """Train one run; (rows, None), or (None, traceback) when it raises: a failed run is
     reported by the driver while the others go on. A damaged checkpoint is named and the run
-    trained again from the start (the cache's runs are deterministic)."""
+    trained again from the start (the cache's runs are deterministic). Memory, disk or
+    permissions running out is (None, ``RESOURCE`` + one line): the driver then stops."""
     try:
         try:
             rows = train(cfg, checkpoints, progress=False)
         except DamagedFile as err:
             print(f"warning: {err}; training the run again from the start", file=sys.stderr, flush=True)
             rows = train(cfg, checkpoints, resume=False, progress=False)
-    except Exception:
-        return None, traceback.format_exc()
+    except Exception as err:
+        resource = resource_error(err)  # the machine's, not the run's: the driver stops every run
+        return None, RESOURCE + resource if resource else traceback.format_exc()
     return rows, None
+
+
+RESOURCE = "resource: "  # how a job's error says that memory, disk or permissions ran out
 
 
 def local(jobs, workers: int = 2, address: str | None = None):

@@ -197,6 +197,9 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise ValueError(f"workers = {workers!r} is invalid; allowed: an integer >= 1")
+    figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
     todo, skipped = [], {}
     for run in grid_runs(budget, figures):
         missing_engine = _missing_engine(run.cfg)
@@ -220,6 +223,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
                                                                               address=address), 1):
             if error is None:
                 write_frame(rows, run_path(run.cfg, budget))
+            elif error.startswith(executors.RESOURCE):  # every other run would fail alike: stop them all
+                raise OSError(error.removeprefix(executors.RESOURCE))
             else:
                 failed.append(Failure(run, error))
                 tqdm.write(failed[-1].report(), file=sys.stderr)

@@ -49,9 +49,7 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     its own (else ``color_of``)."""
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     if df.empty:  # e.g. load_figure(..., skip_missing=True) with nothing on disk
-        ax.text(0.5, 0.5, "no runs on disk", ha="center", va="center", transform=ax.transAxes)
-        ax.set(title=title)
-        return ax
+        return _no_runs(ax, title)
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     seeds_of = {}
     for label in order:  # the bold medians first, every curve's seeds on top: no seed hides under another curve
@@ -86,6 +84,8 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     level as a bar (the lower middle run where the count is even: a level some run reached; a
     mean or IQM of trapped and optimal seeds describes no run)."""
     ax = ax or plt.subplots(figsize=(5, 4))[1]
+    if runs.empty:
+        return _no_runs(ax, title)
     order = order if order is not None else list(dict.fromkeys(runs["label"]))
     finals = [runs.loc[runs["label"] == o, "final"].to_numpy(float) for o in order]
     colors = [color_of(o, order) for o in order]
@@ -119,8 +119,18 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
     return ax
 
 
+def _no_runs(ax, title):
+    """An empty frame (``load_figure(..., skip_missing=True)`` with nothing on disk) drawn as such."""
+    ax.text(0.5, 0.5, "no runs on disk", ha="center", va="center", transform=ax.transAxes)
+    ax.set(title=title)
+    return ax
+
+
 def reuse_heatmap(m: np.ndarray, ax=None, title=None, names=None):
     """Fig. 2a-c: the reuse matrix, M[i, j] = P(learner i trains on agent j's experience)."""
+    m = np.asarray(m, dtype=float)
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or m.size == 0:
+        raise ValueError(f"M must be a square (n, n) matrix with n >= 1, got shape {m.shape}")
     ax = ax or plt.subplots(figsize=(3.5, 3.5))[1]
     n = m.shape[0]
     names = names or [f"pi{i + 1}" for i in range(n)]

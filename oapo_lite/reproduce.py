@@ -155,15 +155,12 @@ def _positive(text: str) -> int:
 
 def _check_writable(folder: Path) -> None:
     """Fail at the start, not after the first run, if results cannot be written to ``folder``."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".write-test-{os.getpid()}"
-        probe.touch()
-        probe.unlink()
-    except OSError as err:
+    from oapo_lite.store import cannot_write
+
+    why = cannot_write(folder)
+    if why:
         moved = f" (OAPO_FIGURES={os.environ['OAPO_FIGURES']!r})" if os.environ.get("OAPO_FIGURES") else ""
-        raise ValueError(f"cannot write results to {folder}{moved}: {err.strerror}; "
-                         "point OAPO_FIGURES at a folder you can write") from None
+        raise ValueError(f"cannot write results to {folder}{moved}: {why}; point OAPO_FIGURES at a folder you can write")
 
 
 def _interrupt(signum, frame):

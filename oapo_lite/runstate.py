@@ -116,7 +116,7 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     path = Path(out_dir) / "checkpoint.pt"
     try:
         ck = torch.load(path, weights_only=False)
-    except FileNotFoundError:
+    except (FileNotFoundError, PermissionError):  # absent or unreadable, not damaged: starting afresh would lose it
         raise
     except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
         detail = str(err).split(". ")[0][:120] or "no detail"

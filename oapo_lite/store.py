@@ -68,6 +68,19 @@ def atomic_write(write: Callable[[str], None], path: Path) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def cannot_write(folder: Path) -> str | None:
+    """Why ``folder`` cannot be made or written to (the system's words), or None if it can: a
+    command checks its output folders at the start, not after its first run."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        return err.strerror or str(err)
+    return None
+
+
 def _write_errno(path: Path) -> int:
     """ENOSPC when the device holding ``path`` is (nearly) full, else EIO."""
     return errno.ENOSPC if shutil.disk_usage(path.parent).free < 2**20 else errno.EIO

@@ -49,26 +49,33 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     if not isinstance(cfg, TrainConfig):
         raise TypeError(f"train's cfg must be a TrainConfig, got {type(cfg).__name__} {cfg!r}; "
                         "e.g. train(TrainConfig(algo='oappo'), 'runs/x')")
-    if not isinstance(out_dir, (str, os.PathLike)):
-        raise TypeError(f"train's out_dir must be a folder path (str or Path), got {type(out_dir).__name__} "
-                        f"{out_dir!r}")
+    if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir).strip():
+        raise TypeError(f"train's out_dir must be a folder path (a non-empty str or a Path), got "
+                        f"{type(out_dir).__name__} {out_dir!r}")
+    if tensorboard is not None and (not isinstance(tensorboard, (str, os.PathLike)) or not str(tensorboard).strip()):
+        raise TypeError(f"train's tensorboard must be None or a folder path, got {tensorboard!r}")
     out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OSError(f"cannot create the run folder {out} ({err.strerror}); choose another output folder "
-                      "(--out on the command line)") from None
-    lock = Lock(out / ".lock")  # two processes on one run: the second waits, then resumes where the first ended
-    if not lock.acquire(wait=False):
-        print(f"waiting for another process that is training {out}", file=sys.stderr, flush=True)
-        lock.acquire()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores
+    lock = None
     try:
-        return _train(cfg, out, resume, progress, callback, {} if timing is None else timing, tensorboard)
+        # the env and learner first: what the config asks of the env (a seat count, a mask's shape)
+        # is refused before a run folder exists
+        state = RunState.start(cfg)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OSError(f"cannot create the run folder {out} ({err.strerror}); choose another output folder "
+                          "(--out on the command line)") from None
+        lock = Lock(out / ".lock")  # two processes on one run: the second waits, then resumes where the first ended
+        if not lock.acquire(wait=False):
+            print(f"waiting for another process that is training {out}", file=sys.stderr, flush=True)
+            lock.acquire()
+        return _train(state, out, resume, progress, callback, {} if timing is None else timing, tensorboard)
     finally:
         torch.set_num_threads(threads)
-        lock.release()
+        if lock is not None:
+            lock.release()
 
 
 def iterate(state: RunState, clock: dict) -> dict:
@@ -110,11 +117,11 @@ def iterations_reusing(history: list[dict]) -> float:
     return float(np.mean([h["peer_share"] > 0 for h in history]))
 
 
-def _train(cfg: TrainConfig, out: Path, resume: bool, progress: bool, callback, clock: dict,
+def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, clock: dict,
            tensorboard: str | Path | None) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
-    state, revision = RunState.start(cfg), git_revision()
+    cfg, revision = state.cfg, git_revision()
     if resume and (out / "checkpoint.pt").exists():
         state.load_state_dict(load_checkpoint(out))
         save_results(state.rows, out)  # a results.csv deleted or damaged after the checkpoint comes back

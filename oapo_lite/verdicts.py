@@ -94,6 +94,8 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     ``y`` over the last ``tail`` of its evaluation points (column ``final``: a fraction of the
     optimum, a win rate or a return, as ``y`` is), its initial value (its first ``INITIAL``), its
     peak, and its largest drop below an earlier peak."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     rows = []
     if df.empty:
         df = pd.DataFrame(columns=["label", "seed", "step", y])
@@ -137,10 +139,10 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     last step at which one did (NaN: never). ``all_iterations``: the share over every iteration,
     where the run recorded it (``iterations_reusing``, at its last evaluation), else NaN. Runs
     without a reuse matrix (SEAC, SePS) have no row."""
+    columns = ["label", "seed", "evaluations", "reusing", "mean_peer_share", "last_reuse_step", "all_iterations"]
     rows = []
-    if df.empty:
-        df = pd.DataFrame(columns=["label", "seed", "step", y])
-    for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
+    groups = df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False) if len(df) else []
+    for (label, seed), run in groups:
         steps, share = _peer_shares(run)
         if not len(steps):  # SEAC, SePS: no reuse matrix
             continue
@@ -149,7 +151,7 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
         rows.append({"label": label, "seed": seed, "evaluations": len(steps), "reusing": float(np.mean(share > 0)),
                      "mean_peer_share": float(share.mean()),
                      "last_reuse_step": float(reusing.max()) if len(reusing) else np.nan, "all_iterations": float(every)})
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=columns)
 
 
 def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:

@@ -29,6 +29,21 @@ QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episo
 SMALL = dict(env="black_red", n_envs=8, rollout_len=25, steps=400, eval_every=1, eval_episodes=4)
 
 
+def quick_but(argv) -> list[str]:
+    """QUICK less the flags ``argv`` gives (a flag given twice is an error) and, for SEAC / SePS,
+    less --rollout-len (their rollout is n_step long)."""
+    drop = {a for a in argv if a.startswith("--")} | ({"--rollout-len"} if {"seac", "seps"} & set(argv) else set())
+    out, skip = [], False
+    for a in QUICK:
+        if skip:
+            skip = False
+        elif a in drop:
+            skip = a != "--no-progress"
+        else:
+            out.append(a)
+    return out
+
+
 def _cli_error(capsys, *argv) -> str:
     """Run the CLI, expect exit status 2 and one line on stderr, no traceback; return the line."""
     try:
@@ -60,13 +75,16 @@ def _cli_error(capsys, *argv) -> str:
     (["--algo", "oappo", "--cg-iters", "3"], ["--cg-iters does not apply", "'hatrpo', 'oatrpo'"]),
     (["--algo", "seac", "--lr", "0.1"], ["--lr does not apply to --algo seac"]),
     (["--lr-ann", "true"], ["unrecognized arguments: --lr-ann"]),  # an abbreviation could name another flag
+    (["--seed", "1", "--seed", "2"], ["--seed is given 2 times; give it once"]),
+    (["--steps", "599"], ["--steps 599 is not a whole number of iterations", "a multiple of 200, e.g. 400 or 600"]),
+    (["--tensorboard", ""], ["--tensorboard '' is not a folder"]),
+    (["--env", "maps/no_such_map.txt"], ["no such map file"]),
+    (["--algo", "seps", "--seps-clusters", "5", "--seps-pretrain-steps", "200"], ["seps_clusters = 5", "2 agents"]),
     (["--eval-episodes", "10000000000"], ["out of memory", "--eval-episodes"]),
     (["--hidden", "2000000", "2000000"], ["out of memory", "--hidden"]),
 ])
 def test_a_bad_training_option_is_one_line_naming_it(tmp_path, capsys, argv, words):
-    a2c = any(algo in argv for algo in ("seac", "seps"))  # their rollout is n_step long: no --rollout-len
-    quick = [a for a in QUICK if a not in ("--rollout-len", "25")] if a2c else QUICK
-    err = _cli_error(capsys, "train", *quick, "--out", str(tmp_path), *argv)
+    err = _cli_error(capsys, "train", *quick_but(argv), "--out", str(tmp_path), *argv)
     for word in words:
         assert word in err
 
@@ -379,7 +397,7 @@ def test_a_maze_beyond_the_time_limit_or_without_a_positive_optimum_is_refused(t
 def test_resource_errors_name_what_ran_out_and_what_to_do(tmp_path, monkeypatch):
     from oapo_lite.cli import resource_error
 
-    assert "no space left on the device writing /x/y" in resource_error(OSError(errno.ENOSPC, "full", "/x/y"))
+    assert "no space left on the device: /x/y" in resource_error(OSError(errno.ENOSPC, "full", "/x/y"))
     assert "out of memory" in resource_error(MemoryError("Unable to allocate 5 TiB"))
     assert "permission denied" in resource_error(PermissionError(errno.EACCES, "no", "/x"))
     assert resource_error(ValueError("a bad value")) is None
@@ -487,7 +505,7 @@ def test_reading_results_never_writes(tmp_path, monkeypatch):
 def test_the_statistics_take_a_frame_with_no_run(tmp_path):
     empty = pd.DataFrame()
     assert verdicts.per_run(empty).empty and list(verdicts.per_run(empty).columns) == verdicts.PER_RUN_COLUMNS
-    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty
+    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty and verdicts.reuse_summary(empty).empty
     assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
     assert np.isnan(verdicts.probability_of_improvement([np.nan, np.nan], [1, 2]))
     assert verdicts.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
@@ -495,8 +513,83 @@ def test_the_statistics_take_a_frame_with_no_run(tmp_path):
 
 @pytest.mark.parametrize("args, words", [
     (("oappo", "runs"), "cfg must be a TrainConfig, got str"),
-    ((TrainConfig(), None), "out_dir must be a folder path (str or Path), got NoneType"),
+    ((TrainConfig(), None), "out_dir must be a folder path (a non-empty str or a Path), got NoneType"),
 ])
 def test_train_names_an_argument_of_the_wrong_kind(args, words):
     with pytest.raises(TypeError, match=re.escape(words)):
         train(*args)
+
+
+def test_what_the_env_cannot_honour_is_refused_before_a_run_folder(tmp_path):
+    with pytest.raises(ValueError, match=r"allowed mask has shape \(1, 1\), expected \(2, 2\)"):
+        train(TrainConfig(allowed=[[True]], **SMALL), tmp_path / "run")
+    with pytest.raises(ValueError, match="seps_clusters = 5"):
+        train(TrainConfig(algo="seps", seps_clusters=5, seps_pretrain_steps=200, **{**SMALL, "rollout_len": 50}),
+              tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(TypeError, match="non-empty str"):
+        train(TrainConfig(**SMALL), "")
+
+
+def test_no_command_and_a_folder_as_map_are_one_line(tmp_path, capsys):
+    assert cli.main([]) == 2 and "error: no command given" in capsys.readouterr().err
+    assert "is a folder" in _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path), "--env", str(tmp_path))
+    board = tmp_path / "a_file"
+    board.write_text("x")
+    assert "is not a folder" in _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path / "o"),
+                                           "--tensorboard", str(board))
+
+
+def test_an_unreadable_checkpoint_is_not_called_damaged(tmp_path, monkeypatch):
+    from oapo_lite import runstate
+    from oapo_lite.cli import resource_error
+
+    (tmp_path / "checkpoint.pt").write_bytes(b"x")
+
+    def denied(path, **kw):
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+
+    monkeypatch.setattr(runstate.torch, "load", denied)
+    with pytest.raises(PermissionError) as caught:
+        load_checkpoint(tmp_path)
+    assert resource_error(caught.value).startswith(f"permission denied: {tmp_path / 'checkpoint.pt'}; fix its")
+
+
+def test_a_full_disk_stops_reproduce_with_one_line(tmp_path):
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here (not root)")
+    try:
+        done = subprocess.run([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", "smoke", "--figures",
+                               "fig1", "--skip-notebooks", "--workers", "1", "--check"],
+                              env={**os.environ, "OAPO_FIGURES": str(disk)}, capture_output=True, text=True, timeout=300)
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.strip().splitlines()[-1].startswith("error: no space left on the device: ")
+
+
+def test_the_api_names_bad_arguments(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    for label, cfg in grid.figure_runs("fig1", "smoke"):
+        fakes.write_run(cfg, "smoke", lambda s: s / 400)
+    assert experiments.run_all("smoke", figures="fig1", workers=1, progress=False).cached == 1  # one name is a figure
+    for workers in (0, -3, "2", True):
+        with pytest.raises(ValueError, match=f"workers = {re.escape(repr(workers))} is invalid"):
+            experiments.run_all("smoke", figures=["fig1"], workers=workers)
+    with pytest.raises(TypeError, match="must be a pandas DataFrame"):
+        verdicts.summary(None)
+    with pytest.raises(ValueError, match=r"square \(n, n\) matrix"):
+        plotting.reuse_heatmap(np.array([]))
+    assert plotting.final_bars(pd.DataFrame()).texts[0].get_text() == "no runs on disk"
+
+
+def test_every_notebook_names_its_kernel():
+    """papermill without -k reads the kernel from the notebook."""
+    import nbformat
+
+    from oapo_lite.reproduce import NOTEBOOKS
+
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        assert nbformat.read(path, as_version=4).metadata.get("kernelspec", {}).get("name") == "python3", path.name
