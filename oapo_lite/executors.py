@@ -10,6 +10,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import re
+import signal
 import sys
 import tempfile
 import threading
@@ -57,7 +58,7 @@ def local(jobs, workers: int = 2, address: str | None = None):
     # spawned, not forked: a parent that has imported JAX (SMAX) or started torch's threads
     # cannot fork safely (JAX warns of deadlocks; a forked pool hung the test suite)
     pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
-                               initializer=die_with_parent, initargs=(os.getpid(),))
+                               initializer=pool_worker, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
         for future in as_completed(futures):
@@ -79,6 +80,14 @@ def stop(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for process in list((pool._processes or {}).values()):  # no public way to end running workers (3.11)
         process.terminate()
+
+
+def pool_worker(parent: int) -> None:
+    """Pool initializer: leave Ctrl-C to the driver, which gets it too and then cancels the
+    queue and ends this worker (a worker that took it would start the next queued run before
+    the driver could cancel it), and die with the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
 
 
 def die_with_parent(parent: int) -> None:

@@ -124,7 +124,7 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from oapo_lite.executors import die_with_parent, stop
+    from oapo_lite.executors import pool_worker, stop
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -133,7 +133,7 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     # spawned, as the training pool, and no more workers than notebooks: a fork pool starts all
     # of its workers at the first submit, each a copy of this process
     with ProcessPoolExecutor(max_workers=max(1, min(workers, len(paths))), mp_context=mp.get_context("spawn"),
-                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+                             initializer=pool_worker, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_timed_run, path, out_dir / path.name,
                                {"budget": budget} if takes_budget(path) else {}): path for path in paths}
         try:
