@@ -94,13 +94,22 @@ def mathjax_dir() -> Path:
     return path
 
 
+SOURCES_MARK = ".oapo-book-sources"  # marks <out>-src as the book's own, which a new build may replace
+
+
 def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     """Write the Sphinx sources next to ``out`` and build the HTML site into ``out``; returns
     the site's index.html."""
     out = Path(out).resolve()
     src = out.parent / f"{out.name}-src"
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file; allowed: a folder for the site")
+    if src.exists() and not (src / SOURCES_MARK).exists():  # never delete what the book did not write
+        raise ValueError(f"{src} exists and was not written by the book (it writes its sources there); move it or "
+                         "choose another --out")
     shutil.rmtree(src, ignore_errors=True)
     (src / "notebooks").mkdir(parents=True)
+    (src / SOURCES_MARK).write_text("the book's Sphinx sources, rewritten at every build\n")
     paths = notebook_paths() if notebooks == NOTEBOOKS else sorted(Path(notebooks).glob("[0-9]*.ipynb"))
     for path in paths:
         shutil.copy2(path, src / "notebooks" / path.name)

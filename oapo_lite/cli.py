@@ -18,6 +18,16 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, refusing a flag given twice: argparse keeps the last value and drops the
+        first without a word."""
+        args = sys.argv[1:] if args is None else list(args)
+        for action in self._actions:
+            given = sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in args)
+            if given > 1:
+                self.error(f"{action.option_strings[0]} is given {given} times; give it once")
+        return super().parse_args(args, namespace)
+
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 

@@ -34,9 +34,9 @@ def figures_dir(budget: str) -> Path:
     """The committed budgets' figures live in figures/; others go to a side folder.
 
     ``OAPO_FIGURES`` moves the whole tree elsewhere (the timing benchmark uses it so as not
-    to touch the committed results).
+    to touch the committed results); set but empty, it counts as unset (not the working folder).
     """
-    root = Path(os.environ.get("OAPO_FIGURES", ROOT / "figures"))
+    root = Path(os.environ.get("OAPO_FIGURES") or ROOT / "figures")
     return root if budget in COMMITTED else root / budget
 
 

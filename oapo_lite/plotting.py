@@ -129,8 +129,9 @@ def _no_runs(ax, title):
 def reuse_heatmap(m: np.ndarray, ax=None, title=None, names=None):
     """Fig. 2a-c: the reuse matrix, M[i, j] = P(learner i trains on agent j's experience)."""
     m = np.asarray(m, dtype=float)
-    if m.ndim != 2 or m.shape[0] != m.shape[1] or m.size == 0:
-        raise ValueError(f"M must be a square (n, n) matrix with n >= 1, got shape {m.shape}")
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or m.size == 0 or not np.isfinite(m).all():
+        raise ValueError(f"M must be a square (n, n) matrix of numbers with n >= 1, got shape {m.shape}"
+                         + ("" if m.size == 0 or np.isfinite(m).all() else " with NaN or inf"))
     ax = ax or plt.subplots(figsize=(3.5, 3.5))[1]
     n = m.shape[0]
     names = names or [f"pi{i + 1}" for i in range(n)]

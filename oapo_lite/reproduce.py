@@ -53,6 +53,8 @@ def check_parameters(*names: str) -> None:
     unknown = sorted(given - set(names))
     if unknown:
         raise ValueError(f"unknown notebook parameter(s) {unknown}; this notebook takes {sorted(names)}")
+    if "budget" in given:  # a bad value, named here rather than where the budget is first used
+        grid.get_budget(shell.user_ns["budget"])
 
 
 class NotebookFailed(RuntimeError):
@@ -191,6 +193,8 @@ def main(argv: list[str] | None = None) -> int:
         grid.get_budget(args.budget)
         for figure in args.figures:
             grid.get_figure(figure)
+        if args.inplace and args.skip_notebooks:
+            raise ValueError("--inplace writes the executed notebooks, and --skip-notebooks runs none; give one")
         if args.address is not None and args.executor != "ray":
             raise ValueError(f"--address {args.address!r} needs --executor ray")
         if args.executor == "ray":

@@ -54,6 +54,9 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
                         f"{type(out_dir).__name__} {out_dir!r}")
     if tensorboard is not None and (not isinstance(tensorboard, (str, os.PathLike)) or not str(tensorboard).strip()):
         raise TypeError(f"train's tensorboard must be None or a folder path, got {tensorboard!r}")
+    for name, value in (("resume", resume), ("progress", progress)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"train's {name} must be True or False, got {value!r}")
     out = Path(out_dir)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores

@@ -99,6 +99,10 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     rows = []
     if df.empty:
         df = pd.DataFrame(columns=["label", "seed", "step", y])
+    lacking = [c for c in ("label", "seed", "step", y) if c not in df]
+    if lacking:
+        raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step and {y!r} "
+                         "(e.g. experiments.load_figure's rows)")
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
         k, k0 = max(1, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))

@@ -593,3 +593,35 @@ def test_every_notebook_names_its_kernel():
 
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
         assert nbformat.read(path, as_version=4).metadata.get("kernelspec", {}).get("name") == "python3", path.name
+
+
+def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
+    """Found by a second hostile audit after the first fixes."""
+    from oapo_lite import book
+
+    assert "--budget is given 2 times" in _cli_error(capsys, "reproduce", "--budget", "smoke", "--budget", "cpu")
+    assert "--inplace writes" in _cli_error(capsys, "reproduce", "--inplace", "--skip-notebooks")
+    afile = tmp_path / "site"
+    afile.write_text("x")
+    assert "is a file; allowed: a folder" in _cli_error(capsys, "book", "--out", str(afile))
+    mine = tmp_path / "book-src" / "precious.txt"
+    mine.parent.mkdir()
+    mine.write_text("keep me")
+    with pytest.raises(ValueError, match="was not written by the book"):
+        book.build(tmp_path / "book")
+    assert mine.read_text() == "keep me"
+    with pytest.raises(TypeError, match="resume must be True or False, got 'false'"):
+        train(TrainConfig(**SMALL), tmp_path / "r", resume="false")
+    with pytest.raises(ValueError, match=r"lack the columns \['label', 'seed', 'step', 'frac_opt'\]"):
+        verdicts.summary(pd.DataFrame({"a": [1]}))
+    with pytest.raises(ValueError, match="with NaN or inf"):
+        plotting.reuse_heatmap(np.full((2, 2), np.nan))
+    monkeypatch.setenv("OAPO_FIGURES", "")
+    assert experiments.figures_dir("paper") == experiments.ROOT / "figures"  # empty counts as unset
+
+
+def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
+    from oapo_lite.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+
+    with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget 'nope'"):
+        run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": "nope"})
