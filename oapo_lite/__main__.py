@@ -81,24 +81,15 @@ def train_parser() -> argparse.ArgumentParser:
 
 def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: dict) -> None:
     """What the run could not honour is an error, not a silent no-op: a flag for a field the
-    algorithm does not read, steps that are not whole iterations (the run would train fewer),
-    an unusable TensorBoard folder. (A flag given twice: ``cli.Parser``.)"""
+    algorithm does not read, an unusable TensorBoard folder. (A flag given twice: ``cli.Parser``;
+    steps that are not whole iterations: ``_refuse_partial_iteration``.)"""
     from oapo_lite.config import ALGOS, readers
     from oapo_lite.store import cannot_write
 
     for action in parser._actions:
-        given = any(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in argv)
-        if given and args["algo"] in ALGOS and args["algo"] not in readers(action.dest):
+        if cli.times_given(action, argv) and args["algo"] in ALGOS and args["algo"] not in readers(action.dest):
             parser.error(f"{action.option_strings[0]} does not apply to --algo {args['algo']}; only "
                          f"{readers(action.dest)} read it")
-    if args["algo"] in ALGOS and isinstance(args["steps"], int):
-        a2c = ALGOS[args["algo"]].a2c
-        per = args["n_envs"] * (args["n_step"] if a2c else args["rollout_len"])
-        if per > 0 and args["steps"] % per:
-            below, above = args["steps"] // per * per, (args["steps"] // per + 1) * per
-            parser.error(f"--steps {args['steps']} is not a whole number of iterations of n_envs x "
-                         f"{'n_step' if a2c else 'rollout_len'} = {per} env steps; allowed: a multiple of {per}, "
-                         f"e.g. {below or above} or {above}")
     board = args.get("tensorboard")
     if board is not None:
         folder = Path(board)
@@ -107,6 +98,19 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
         why = cannot_write(folder)
         if why:
             parser.error(f"--tensorboard {board!r} cannot be written ({why}); choose another folder")
+
+
+def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
+    """The run trains ``steps // iteration_steps`` whole iterations: other steps would be
+    recorded as asked but not trained."""
+    from oapo_lite.config import ALGOS
+
+    per = cfg.iteration_steps
+    if cfg.steps % per:
+        below, above = cfg.steps // per * per, (cfg.steps // per + 1) * per
+        length = "n_step" if ALGOS[cfg.algo].a2c else "rollout_len"
+        parser.error(f"--steps {cfg.steps} is not a whole number of iterations of n_envs x {length} = {per} env "
+                     f"steps; allowed: a multiple of {per}, e.g. {below or above} or {above}")
 
 
 def train_main(argv: list[str]) -> int:
@@ -137,6 +141,7 @@ def train_main(argv: list[str]) -> int:
         parse_maze(args["env"], name=str(path))  # its errors name the file
         name = file_name = path.stem
     cfg = TrainConfig(**args)
+    _refuse_partial_iteration(parser, cfg)
     run_dir = out / run_id(cfg, file_name)
     print(f"run folder: {run_dir}", flush=True)
     start = time.perf_counter()

@@ -23,13 +23,18 @@ class Parser(argparse.ArgumentParser):
         first without a word."""
         args = sys.argv[1:] if args is None else list(args)
         for action in self._actions:
-            given = sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in args)
+            given = times_given(action, args)
             if given > 1:
                 self.error(f"{action.option_strings[0]} is given {given} times; give it once")
         return super().parse_args(args, namespace)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def times_given(action: argparse.Action, args: list[str]) -> int:
+    """How often ``args`` give the flag of ``action`` (as ``--flag value`` or ``--flag=value``)."""
+    return sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in args)
 
 
 def debug_requested(argv: list[str]) -> bool:

@@ -110,12 +110,12 @@ RESULTS = ("iteration", "step", "eval_return", "frac_opt", "eval_success", "trai
 def _config_differs(df: pd.DataFrame, cfg: TrainConfig) -> str | None:
     """The first config field whose column in a run file disagrees with ``cfg``, or None. A
     column the file lacks is a field added since it was written: its default is what ran."""
-    defaults = TrainConfig.__dataclass_fields__
+    changed = _changed(cfg)
     for name, value in cfg.flat().items():
         if name not in df:
-            if name in defaults and getattr(cfg, name) == defaults[name].default:
-                continue
-            return name
+            if name in changed:
+                return name
+            continue
         column = df[name]
         if value is None:
             same = column.isna().all()

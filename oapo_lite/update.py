@@ -247,7 +247,8 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, units: list, order
         objectives.append(objective)
         with torch.no_grad():
             d_new = learner_dists(actors, batch.inputs, src)[src.own]
-            logp_new, active = actors.head.log_prob(d_new, src.act[src.own]), None if src.active is None else src.active[src.own]
+            logp_new = actors.head.log_prob(d_new, src.act[src.own])
+            active = None if src.active is None else src.active[src.own]
             learners.append({"net": src.net, "seats": [src.rows[k] for k in src.own],
                              **update_diagnostics(logp_new, src.logp_old[src.own], actors.head.entropy(d_new), active,
                                                   None if spec.trust_region else cfg.clip)})

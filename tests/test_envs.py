@@ -336,21 +336,18 @@ def test_one_policy_return_is_what_sampled_episodes_earn():
     maze = load_layout("fork-p2-c3-b4-s3-h3")
     value, q = one_policy_return(maze, 50)
     best = optimal_actions(maze)
+    common = best[0] & best[1]
+    fixed = np.argmax(np.where(common.any(-1, keepdims=True), common, best[0] | best[1]), -1)  # per cell
+    red, black = np.argmax(best[0], -1), np.argmax(best[1], -1)
+    q_of = np.full(maze.n_cells, np.nan)
+    q_of[list(q)] = list(q.values())
     rng = np.random.default_rng(0)
     env, returns = VecMaze(maze, n_envs=4000, max_steps=50), np.full(4000, np.nan)
-    cells = np.array([[maze.starts[0], maze.starts[1]]] * 4000)
     env.reset()
     while np.isnan(returns).any():
-        actions = np.empty((4000, 2), dtype=np.int64)
-        for k in range(2):
-            for e, c in enumerate(cells[:, k]):
-                if c in q:  # red's move with probability q, black's otherwise
-                    actions[e, k] = np.argmax(best[int(rng.random() >= q[c]), c])
-                else:
-                    common = best[0, c] & best[1, c]
-                    actions[e, k] = np.argmax(common if common.any() else best[0, c] | best[1, c])
-        out = env.step(actions)
-        cells = env.cells.copy()
+        cells = env.cells
+        mixed = np.where(rng.random(cells.shape) < q_of[cells], red[cells], black[cells])  # red's move w.p. q
+        out = env.step(np.where(np.isnan(q_of[cells]), fixed[cells], mixed))
         first = np.isnan(returns) & ~np.isnan(out.episode_return)
         returns[first] = out.episode_return[first]
     assert abs(returns.mean() - value) < 4 * returns.std() / np.sqrt(len(returns))
