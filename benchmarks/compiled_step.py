@@ -1,6 +1,6 @@
 """What a compiled learner would save: one PPO minibatch step of the project's learner (the
 actor's forward, Eq. 8's clipped objective with the own-seat entropy, backward, the clipped Adam
-step of ``update.descend``), eager against ``torch.compile``, on one thread, at two shapes:
+step of ``ppo_family.descend``), eager against ``torch.compile``, on one thread, at two shapes:
 SMAX 3m MAPPO's minibatch (3 seats x 800 samples, one shared net, no input repeats) and a
 Black-Red learner's full batch (2 sources x 1,600 samples over 300 distinct inputs).
 
@@ -18,11 +18,11 @@ import time
 
 import torch
 
-from oapo_lite.adam import Adam
-from oapo_lite.config import TrainConfig
-from oapo_lite.nets import Actors
-from oapo_lite.rollout import Inputs
-from oapo_lite.update import Sources, descend, ppo_loss
+from oapo_lite.neural.adam import Adam
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.ppo_family import LearnerBatch, descend, ppo_loss
+from oapo_lite.neural.rollout import Inputs
 
 # (name, sources R, of them the learner's own seats, samples per source B, distinct inputs U, obs dim, actions)
 SHAPES = (("SMAX 3m MAPPO minibatch", 3, 3, 800, 2400, 75, 8), ("Black-Red OAPPO learner", 2, 1, 1600, 300, 72, 5))
@@ -36,7 +36,7 @@ def problem(R: int, own: int, B: int, U: int, obs_dim: int, n_actions: int):
     index = torch.randint(0, U, (R, B), generator=g) if U < R * B else torch.randperm(U, generator=g).reshape(R, B)
     inputs = Inputs(torch.randn(U, obs_dim, generator=g), torch.ones(U, n_actions, dtype=torch.bool), index)
     w = torch.full((R,), 1 / R)
-    src = Sources(0, list(range(R)), list(range(own)), w, torch.randint(0, n_actions, (R, B), generator=g),
+    src = LearnerBatch(0, list(range(R)), list(range(own)), w, torch.randint(0, n_actions, (R, B), generator=g),
                   torch.randn(R, B, generator=g) * 0.1 - 1.6, w, None, torch.unique(index, return_inverse=True))
     args = (inputs, src, torch.ones(B), torch.randn(B, generator=g), TrainConfig())
     return actors, Adam(actors.net_params(0), lr=5e-4, eps=1e-5), args

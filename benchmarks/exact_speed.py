@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
-from oapo_lite import exact as ex
 from oapo_lite.envs.maps import load_maze
-from oapo_lite.tabular import TabularConfig, run_tabular
+from oapo_lite.tabular import exact as ex
+from oapo_lite.tabular.algorithm1 import TabularConfig, run_tabular
 
 
 def milliseconds(fn, repeats: int) -> float:

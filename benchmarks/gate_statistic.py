@@ -1,4 +1,4 @@
-"""The gate-statistic study of issue 31 (``oapo_lite/gate_study.py`` says what it measures and
+"""The gate-statistic study of issue 31 (``oapo_lite/study/gate_study.py`` says what it measures and
 the rule that chooses): trains what is missing, then prints the table and the choice.
 
     .venv/bin/python benchmarks/gate_statistic.py --seeds 0 1 2            # every env
@@ -14,7 +14,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from oapo_lite import gate_study  # noqa: E402
+from oapo_lite.study import gate_study  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -39,11 +39,11 @@ import time
 
 import numpy as np
 
-from oapo_lite import grid
-from oapo_lite.config import TrainConfig
 from oapo_lite.envs import grf
-from oapo_lite.runstate import RunState
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.runstate import RunState
+from oapo_lite.neural.train import train
+from oapo_lite.study import grid
 
 from loops import cut_short, profile, warm_up
 

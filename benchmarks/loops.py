@@ -10,9 +10,9 @@ import io
 import pstats
 import tempfile
 
-from oapo_lite import grid
-from oapo_lite.config import TrainConfig
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.train import train
+from oapo_lite.study import grid
 
 
 def cut_short(figure: str, budget: str, algo: str, env: str, iterations: int) -> TrainConfig:

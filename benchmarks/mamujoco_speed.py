@@ -20,8 +20,8 @@ import time
 import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.grid import FIGA_ALGOS, get_figure
-from oapo_lite.train import train
+from oapo_lite.neural.train import train
+from oapo_lite.study.grid import FIGA_ALGOS, get_figure
 
 from loops import cut_short, warm_up
 

@@ -11,7 +11,7 @@ import statistics
 import tempfile
 import time
 
-from oapo_lite import executors, grid
+from oapo_lite.study import executors, grid
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--cpus", type=int, default=2)

@@ -19,7 +19,7 @@ import sys
 import tempfile
 import time
 
-from oapo_lite.grid import MAZE_FIGURES
+from oapo_lite.study.grid import MAZE_FIGURES
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")

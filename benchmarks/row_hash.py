@@ -15,8 +15,8 @@ import time
 import numpy as np
 import torch
 
-from oapo_lite.nets import Actors
-from oapo_lite.rollout import Inputs, _row_hash, collect, make_env
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.rollout import Inputs, _row_hash, collect, make_env
 
 from loops import cut_short
 

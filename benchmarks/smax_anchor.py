@@ -56,9 +56,9 @@ import dataclasses
 import tempfile
 import time
 
-from oapo_lite import grid
-from oapo_lite.config import TrainConfig
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.train import train
+from oapo_lite.study import grid
 
 STEPS = {"3m": 300_000, "2s3z": 500_000}
 
@@ -76,7 +76,7 @@ def config(map_name: str, seed: int, settings: str = "tuned", algo: str = "mappo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", default="3m", choices=grid.SMAX_MAPS)
+    ap.add_argument("--map", default="3m", choices=grid.FIG4_MAPS)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--algo", default="mappo")
     ap.add_argument("--settings", default="tuned", choices=["tuned", "defaults"])

@@ -21,10 +21,10 @@ import time
 
 import numpy as np
 
-from oapo_lite import grid
 from oapo_lite.envs.smax import SmaxVec
-from oapo_lite.config import TrainConfig
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.train import train
+from oapo_lite.study import grid
 
 from loops import cut_short, profile
 
@@ -103,7 +103,7 @@ def project_grid(iterations: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--map", default="3m", choices=grid.SMAX_MAPS)
+    parser.add_argument("--map", default="3m", choices=grid.FIG4_MAPS)
     parser.add_argument("--algos", nargs="+", default=list(grid.SMAX_ALGOS))
     parser.add_argument("--iterations", type=int, default=6)
     parser.add_argument("--grid", action="store_true", help="project the cpu budget's CPU hours instead")

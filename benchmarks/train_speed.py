@@ -20,9 +20,9 @@ import statistics
 import tempfile
 import time
 
-from oapo_lite.config import TrainConfig
-from oapo_lite.grid import runs_of
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.train import train
+from oapo_lite.study.grid import runs_of
 
 from loops import warm_up
 

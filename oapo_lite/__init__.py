@@ -1,1 +1,14 @@
-"""oapo-lite: off-agent trust-region policy optimisation (OAPPO / OATRPO), small and tested."""
+"""oapo-lite: off-agent trust-region policy optimisation (OAPPO / OATRPO), small and tested.
+
+The package in layers; a layer imports only from the layers below it (``tests/test_layers.py``):
+
+    study/     the reproduction: the grid of runs, the run cache and executors, statistics,
+               the verdict rule, the claims, plots, the notebooks' runner and book
+    neural/    the neural track: configs, networks, losses, rollouts, the two algorithm
+               families behind one learner protocol, the training loop
+    tabular/   the exact track: closed-form Dec-POMDP quantities, Algorithm 1 on softmax tables
+    (shared)   envs/ (every engine behind one vector interface), algorithms (the algorithm
+               table), reuse (Eq. 9), store (files that survive a kill), cli (errors as one line)
+
+``study`` reads ``neural`` and ``tabular``; ``neural`` and ``tabular`` never read each other.
+"""

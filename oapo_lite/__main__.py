@@ -46,7 +46,7 @@ class _Renamed(argparse.Action):
 
 
 def train_parser() -> argparse.ArgumentParser:
-    from oapo_lite.config import RENAMED, TrainConfig
+    from oapo_lite.neural.config import RENAMED, TrainConfig
 
     parser = cli.Parser(prog="python -m oapo_lite train", description="Train one run.")
     special = {
@@ -55,7 +55,7 @@ def train_parser() -> argparse.ArgumentParser:
         "networks": dict(type=_none_or(str), help="none (the algorithm's choice), agent, type or one"),
         "bootstrap_truncation": dict(type=_none_or(_bool), help="none (no on the built-in mazes), true or false"),
         "reuse_adapt": dict(type=_none_or(str), help="none (Eq. 9 as written), gradient, gradient_sign or "
-                                                     "gradient_test (oapo_lite/adaptive.py)"),
+                                                     "gradient_test (oapo_lite/neural/adaptive.py)"),
         "seps_clusters": dict(type=_none_or(int), help="none (chosen by the Davies-Bouldin index) or a number"),
         "env": dict(type=str, help=f"a built-in map {sorted(MAPS)}, a path to a map text file, or "
                                    "<engine>:<name> of a real engine, e.g. smax:3m, mamujoco:HalfCheetah-2x3, "
@@ -83,7 +83,8 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
     """What the run could not honour is an error, not a silent no-op: a flag for a field the
     algorithm does not read, an unusable TensorBoard folder. (A flag given twice: ``cli.Parser``;
     steps that are not whole iterations: ``_refuse_partial_iteration``.)"""
-    from oapo_lite.config import ALGOS, readers
+    from oapo_lite.algorithms import ALGOS
+    from oapo_lite.neural.config import readers
     from oapo_lite.store import cannot_write
 
     for action in parser._actions:
@@ -103,7 +104,7 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
 def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
     """The run trains ``steps // iteration_steps`` whole iterations: other steps would be
     recorded as asked but not trained."""
-    from oapo_lite.config import ALGOS
+    from oapo_lite.algorithms import ALGOS
 
     per = cfg.iteration_steps
     if cfg.steps % per:
@@ -116,9 +117,9 @@ def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
 def train_main(argv: list[str]) -> int:
     import pandas as pd
 
-    from oapo_lite.config import TrainConfig
-    from oapo_lite.experiments import run_id
-    from oapo_lite.train import train
+    from oapo_lite.neural.config import TrainConfig
+    from oapo_lite.neural.train import train
+    from oapo_lite.study.experiments import run_id
 
     parser = train_parser()
     args = vars(parser.parse_args(argv))
@@ -164,13 +165,13 @@ def train_main(argv: list[str]) -> int:
 
 
 def _reproduce(argv: list[str]) -> int:
-    from oapo_lite.reproduce import main as reproduce_main
+    from oapo_lite.study.reproduce import main as reproduce_main
 
     return reproduce_main(argv)
 
 
 def _book(argv: list[str]) -> int:
-    from oapo_lite.book import main as book_main
+    from oapo_lite.study.book import main as book_main
 
     return book_main(argv)
 

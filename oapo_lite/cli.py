@@ -65,15 +65,14 @@ def resource_error(err: BaseException) -> str | None:
 
 def report(err: Exception) -> int:
     """Print ``err`` as one line on stderr; the exit status."""
-    from oapo_lite.losses import Diverged
-
     resource = resource_error(err)
     if resource:
         print(f"error: {resource}", file=sys.stderr)
         return 2
-    # bad values, damaged or unwritable files, a missing engine, a run that diverged: the message
-    # says what and what to do; anything else is a bug
-    known = isinstance(err, (ValueError, OSError, ImportError, Diverged))
+    # bad values, damaged or unwritable files, a missing engine, a run that diverged (the neural
+    # track's Diverged is the only FloatingPointError here: numpy's error state is never "raise"):
+    # the message says what and what to do; anything else is a bug
+    known = isinstance(err, (ValueError, OSError, ImportError, FloatingPointError))
     text = " ".join(str(err).split()) or type(err).__name__
     print(f"error: {text}" if known else f"error: {type(err).__name__}: {text} (a bug in oapo_lite? rerun with "
           "--debug for the traceback)", file=sys.stderr)

@@ -9,6 +9,8 @@ import warnings
 
 import numpy as np
 
+from oapo_lite.envs.vec import HasSeatSpaces
+
 
 def _check_n(n: int) -> int:
     if int(n) != n or n < 1:
@@ -197,7 +199,7 @@ def allowed_mask(allowed, agents: tuple[str, ...]) -> np.ndarray | None:
 def check_spaces(env, pairs: np.ndarray) -> None:
     """Reusing experience needs equal observation and action spaces (Section 4). ``pairs[i, j]``:
     learner i may train on agent j's experience (not necessarily symmetric)."""
-    spaces = getattr(env, "spaces", None)
+    spaces = env.spaces if isinstance(env, HasSeatSpaces) else None
     for i, j in zip(*np.nonzero(pairs)):
         if spaces is not None and i != j and spaces[i] != spaces[j]:
             raise ValueError(

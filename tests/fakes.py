@@ -3,7 +3,8 @@ config, with the config's columns)."""
 import numpy as np
 import pandas as pd
 
-from oapo_lite import experiments, store
+from oapo_lite import store
+from oapo_lite.study import experiments
 
 
 def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataFrame:
@@ -25,7 +26,7 @@ def interrupt(cfg, out, at: int) -> None:
     (what a resumed run must continue from)."""
     import pytest
 
-    from oapo_lite.train import train
+    from oapo_lite.neural.train import train
 
     def crash(metrics):
         if metrics["iteration"] == at:

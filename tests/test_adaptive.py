@@ -1,17 +1,18 @@
-"""The adaptive reuse rule (oapo_lite/adaptive.py): a hand-computed case, its limiting cases,
+"""The adaptive reuse rule (oapo_lite/neural/adaptive.py): a hand-computed case, its limiting cases,
 the no-new-fixed-point property, bad inputs, and its place in the training loop."""
 
 import numpy as np
 import pytest
 import torch
 
-from oapo_lite import adaptive, reuse
-from oapo_lite.losses import off_agent_objective
-from oapo_lite.config import TrainConfig
-from oapo_lite.rollout import collect, make_env
-from oapo_lite.train import train
-from oapo_lite.update import Sources, learner_dists, source_gradients
-from oapo_lite.nets import Actors
+from oapo_lite import reuse
+from oapo_lite.neural import adaptive
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import off_agent_objective
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.ppo_family import LearnerBatch, learner_dists, source_gradients
+from oapo_lite.neural.rollout import collect, make_env
+from oapo_lite.neural.train import train
 
 torch.set_num_threads(1)
 
@@ -191,7 +192,7 @@ def test_source_gradients_add_up_to_the_gradient_of_the_weighted_objective(clip)
     # per fold of env copies (8 copies, 4 folds of 2): the whole batch's gradient is their mean
     folds = source_gradients(actors, batch.inputs, batch, m, adv, clip, folds=4)
     assert np.allclose(folds.mean(2), g, atol=1e-6) and not np.allclose(folds[:, :, 0], g)
-    src = Sources.of(0, m[0], [0], batch)
+    src = LearnerBatch.of(0, m[0], [0], batch)
     params = actors.net_params(0)
     d = learner_dists(actors, batch.inputs, src)
     obj = off_agent_objective(actors.head.log_prob(d, src.act), src.logp_old, src.w, torch.ones_like(adv), adv, clip)

@@ -17,13 +17,14 @@ import pytest
 
 import fakes
 
-from oapo_lite import __main__ as cli, grid
-from oapo_lite import experiments, plotting, store, verdicts
-from oapo_lite.executors import train_job
-from oapo_lite.losses import Diverged
-from oapo_lite.config import ALGOS, TrainConfig, readers
-from oapo_lite.runstate import RunState, load_checkpoint
-from oapo_lite.train import _diverged_at, train
+from oapo_lite import __main__ as cli, store
+from oapo_lite.algorithms import ALGOS
+from oapo_lite.neural.config import TrainConfig, readers
+from oapo_lite.neural.losses import Diverged
+from oapo_lite.neural.runstate import RunState, load_checkpoint
+from oapo_lite.neural.train import _diverged_at, train
+from oapo_lite.study import experiments, grid, plotting, statistics, verdicts
+from oapo_lite.study.executors import train_job
 
 QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
 SMALL = dict(env="black_red", n_envs=8, rollout_len=25, steps=400, eval_every=1, eval_episodes=4)
@@ -134,12 +135,12 @@ def test_a_map_file_error_names_the_file(tmp_path, capsys):
 
 
 def test_a_bug_says_how_to_see_its_traceback_and_debug_shows_it(tmp_path, capsys, monkeypatch):
-    import oapo_lite.train
+    import oapo_lite.neural.train
 
     def broken(*args, **kwargs):
         raise KeyError("a bug")
 
-    monkeypatch.setattr(oapo_lite.train, "train", broken)
+    monkeypatch.setattr(oapo_lite.neural.train, "train", broken)
     argv = ["train", *QUICK, "--out", str(tmp_path)]
     assert cli.main(argv) == 1
     err = capsys.readouterr().err
@@ -273,7 +274,7 @@ def test_a_killed_writers_temporary_files_are_removed_by_the_next_write(tmp_path
 
 def test_a_killed_reproduce_driver_takes_its_workers_with_it(tmp_path):
     env = {**os.environ, "OAPO_FIGURES": str(tmp_path)}
-    driver = subprocess.Popen([sys.executable, "-c", "from oapo_lite import experiments; "
+    driver = subprocess.Popen([sys.executable, "-c", "from oapo_lite.study import experiments; "
                                "experiments.run_all('paper', figures=('fig3b',), workers=2, progress=False)"],
                               env=env, stderr=subprocess.DEVNULL)
     def children() -> list[int]:
@@ -454,7 +455,7 @@ def test_an_interrupted_reproduce_cancels_queued_runs_and_says_how_to_resume(tmp
 
 
 def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path):
-    from oapo_lite.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+    from oapo_lite.study.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
 
     with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown notebook parameter\(s\) \['budgte'\]; this "
                                              r"notebook takes \['budget'\]"):
@@ -464,7 +465,7 @@ def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path
 def test_every_notebook_checks_its_parameters_right_after_them():
     import nbformat
 
-    from oapo_lite.reproduce import NOTEBOOKS
+    from oapo_lite.study.reproduce import NOTEBOOKS
 
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
         cells = nbformat.read(path, as_version=4).cells
@@ -507,8 +508,8 @@ def test_the_statistics_take_a_frame_with_no_run(tmp_path):
     assert verdicts.per_run(empty).empty and list(verdicts.per_run(empty).columns) == verdicts.PER_RUN_COLUMNS
     assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty and verdicts.reuse_summary(empty).empty
     assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
-    assert np.isnan(verdicts.probability_of_improvement([np.nan, np.nan], [1, 2]))
-    assert verdicts.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
+    assert np.isnan(statistics.probability_of_improvement([np.nan, np.nan], [1, 2]))
+    assert statistics.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
 
 
 @pytest.mark.parametrize("args, words", [
@@ -541,8 +542,8 @@ def test_no_command_and_a_folder_as_map_are_one_line(tmp_path, capsys):
 
 
 def test_an_unreadable_checkpoint_is_not_called_damaged(tmp_path, monkeypatch):
-    from oapo_lite import runstate
     from oapo_lite.cli import resource_error
+    from oapo_lite.neural import runstate
 
     (tmp_path / "checkpoint.pt").write_bytes(b"x")
 
@@ -589,7 +590,7 @@ def test_every_notebook_names_its_kernel():
     """papermill without -k reads the kernel from the notebook."""
     import nbformat
 
-    from oapo_lite.reproduce import NOTEBOOKS
+    from oapo_lite.study.reproduce import NOTEBOOKS
 
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
         assert nbformat.read(path, as_version=4).metadata.get("kernelspec", {}).get("name") == "python3", path.name
@@ -597,7 +598,7 @@ def test_every_notebook_names_its_kernel():
 
 def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
     """Found by a second hostile audit after the first fixes."""
-    from oapo_lite import book
+    from oapo_lite.study import book
 
     assert "--budget is given 2 times" in _cli_error(capsys, "reproduce", "--budget", "smoke", "--budget", "cpu")
     assert "--inplace writes" in _cli_error(capsys, "reproduce", "--inplace", "--skip-notebooks")
@@ -621,7 +622,7 @@ def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
 
 
 def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
-    from oapo_lite.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+    from oapo_lite.study.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
 
     with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget 'nope'"):
         run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": "nope"})

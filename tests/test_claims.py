@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from oapo_lite import claims, grid, verdicts
+from oapo_lite.study import claims, grid, verdicts
 
 import fakes
 
@@ -28,7 +28,7 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
 def test_the_readme_carries_the_claims_table_the_data_gives():
     """The README's copy of the claims table is what the committed runs give today."""
     block, table = claims.readme_block(), claims.glance()
-    assert block == claims.readme_markdown(table), "the README's claims table is stale: run python -m oapo_lite.claims"
+    assert block == claims.readme_markdown(table), "the README's claims table is stale: run python -m oapo_lite.study.claims"
     assert block.endswith(claims.markdown(table)) and len(claims.MEANING) == len(set(claims.SHORT.values()))
 
 
@@ -54,7 +54,7 @@ def test_glance_budgets_are_shares_of_the_paper():
 def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
     """``grid.A2C_CHOSEN`` is the setting ``verdicts.sweep_table``'s rule picks from the committed
     SEAC / SePS sweep on 3m, per algorithm."""
-    from oapo_lite import experiments
+    from oapo_lite.study import experiments
 
     df = experiments.read_figure("fig_a2c_smax", "cpu")[0]
     family = {label: label.split()[0] for label in df["label"].unique()}
@@ -67,7 +67,7 @@ def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
 def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
     """``grid.SWEEP_CHOSEN`` (Fig. 4's learning rate, entropy and clip per family) is what the
     sweep's rule picks from the committed 2s3z sweep."""
-    from oapo_lite import experiments
+    from oapo_lite.study import experiments
 
     df = experiments.read_figure("fig_sweep_2s3z", "cpu")[0]
     family = {label: label.split(" lr=")[0] for label in df["label"].unique()}

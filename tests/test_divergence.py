@@ -8,13 +8,14 @@ import torch
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from oapo_lite.nets import Actors
-from oapo_lite.config import ALGOS, TrainConfig
-from oapo_lite.losses import Diverged
-from oapo_lite.rollout import Inputs, Rollout
-from oapo_lite.runstate import load_checkpoint
-from oapo_lite.train import train
-from oapo_lite.update import policy_distances, update_actors, update_units
+from oapo_lite.algorithms import ALGOS
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import Diverged
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.ppo_family import policy_distances, update_actors, update_units
+from oapo_lite.neural.rollout import Inputs, Rollout
+from oapo_lite.neural.runstate import load_checkpoint
+from oapo_lite.neural.train import train
 
 torch.set_num_threads(1)
 

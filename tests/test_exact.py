@@ -15,8 +15,8 @@ import itertools
 import numpy as np
 import pytest
 
-from oapo_lite import exact as ex
 from oapo_lite.envs.maps import load_maze
+from oapo_lite.tabular import exact as ex
 
 
 @pytest.fixture(scope="module")

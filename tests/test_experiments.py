@@ -5,8 +5,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from oapo_lite import experiments, grid
-from oapo_lite.config import TrainConfig
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.study import experiments, grid
 
 import fakes
 
@@ -74,7 +74,7 @@ def test_a_new_figure_is_data_with_its_own_budget_overrides():
 
 
 def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
-    from oapo_lite import executors, reproduce
+    from oapo_lite.study import executors, reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     (cfg,) = [cfg for _, cfg in grid.figure_runs("fig1", "smoke")]
@@ -96,7 +96,7 @@ def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recove
 
 
 def test_bad_executor_options_name_what_is_allowed(capsys):
-    from oapo_lite import reproduce
+    from oapo_lite.study import reproduce
 
     for argv, message in ((["--figures", "fig9"], "unknown figure 'fig9'"),
                           (["--address", "auto"], "needs --executor ray"),
@@ -164,7 +164,7 @@ def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
 
 
 def test_train_runs_trains_what_is_missing_and_names_failures(tmp_path, monkeypatch):
-    from oapo_lite import executors
+    from oapo_lite.study import executors
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     experiments.train_runs("smoke", ["fig1"], workers=1)

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from oapo_lite import experiments, grid
 from oapo_lite.__main__ import main
 from oapo_lite.envs import grf
-from oapo_lite.config import TrainConfig
-from oapo_lite.nets import Actors
-from oapo_lite.rollout import episode_scores
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.rollout import episode_scores
+from oapo_lite.neural.train import train
+from oapo_lite.study import experiments, grid
 
 SCENARIO = "academy_3_vs_1_with_keeper"
 needs_grf = pytest.mark.skipif(not grf.installed() and not os.environ.get("CI"),

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from oapo_lite import experiments, grid, layout_study
 from oapo_lite.envs.layouts import LAYOUTS
+from oapo_lite.study import experiments, grid, layout_study
 
 import fakes
 

@@ -4,9 +4,8 @@ import itertools
 import pytest
 from pettingzoo.test import parallel_api_test
 
-from oapo_lite.envs import MAPS, MazeParallelEnv, VecMaze, load_maze, registry
-from oapo_lite.envs import layouts as L
-from oapo_lite.config import TrainConfig
+from oapo_lite.envs import MAPS, MazeParallelEnv, VecMaze, layouts as L, load_maze, registry
+from oapo_lite.neural.config import TrainConfig
 
 # a brute-force sweep beyond the study's layouts: every claim must hold on every fork
 SWEEP = [L.Fork(p, c, b, s, h) for p, b, s, h in itertools.product((0, 1, 3), (1, 2), (1, 2), (1, 3))

@@ -8,12 +8,12 @@ import pytest
 import torch
 
 from oapo_lite import reuse
-from oapo_lite.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
-from oapo_lite.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
-from oapo_lite.config import TrainConfig
-from oapo_lite.rollout import States
-from oapo_lite.adam import Adam
-from oapo_lite.update import _minibatches, advantages, descend, update_critic, values
+from oapo_lite.neural.adam import Adam
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import gae, normalise, off_agent_objective, source_mean, update_factor, value_loss, weighted_kl
+from oapo_lite.neural.nets import Actors, Categorical, Critic, Gaussian, ValueNorm
+from oapo_lite.neural.ppo_family import _minibatches, advantages, critic_values, descend, update_critic
+from oapo_lite.neural.rollout import States
 
 torch.set_num_threads(1)
 
@@ -106,19 +106,19 @@ def test_the_critic_on_distinct_states_moves_as_on_every_samples_own_state(n_min
         torch.testing.assert_close(moved, reference, rtol=1e-5, atol=1e-6)
 
 def test_values_forward_states_that_do_not_repeat_as_they_come():
-    """Where few states repeat (the engines' batches), ``values`` forwards the samples' own rows
+    """Where few states repeat (the engines' batches), ``critic_values`` forwards the samples' own rows
     in their order: the same numbers and the same gradient, bit for bit, as the plain forward;
     where most repeat it reads each sample's value from its distinct state."""
     g = torch.Generator().manual_seed(1)
     rows, critic = torch.randn(40, 6, generator=g), Critic(6, (16, 16), g)
     index = torch.randperm(40, generator=g)[torch.tensor([*range(30), 0, 1, 2])]  # 3 repeats of 33
     plain = critic(rows[index])
-    assert torch.equal(values(critic, rows, index), plain)
+    assert torch.equal(critic_values(critic, rows, index), plain)
     grads = [torch.autograd.grad(f().square().mean(), list(critic.parameters()))
-             for f in (lambda: values(critic, rows, index), lambda: critic(rows[index]))]
+             for f in (lambda: critic_values(critic, rows, index), lambda: critic(rows[index]))]
     assert all(torch.equal(a, b) for a, b in zip(*grads))
     repeating = index[torch.randint(0, 10, (50,), generator=g)]  # 10 distinct states in 50
-    torch.testing.assert_close(values(critic, rows, repeating), critic(rows[repeating]))
+    torch.testing.assert_close(critic_values(critic, rows, repeating), critic(rows[repeating]))
 
 
 def _sources(seed=0, S=3, B=50):

@@ -6,11 +6,11 @@ import pytest
 import torch
 
 from oapo_lite.envs import mamujoco, registry
-from oapo_lite.nets import Actors
-from oapo_lite.config import TrainConfig
-from oapo_lite.rollout import collect
-from oapo_lite.runstate import load_checkpoint
-from oapo_lite.train import train
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.rollout import collect
+from oapo_lite.neural.runstate import load_checkpoint
+from oapo_lite.neural.train import train
 
 import fakes
 

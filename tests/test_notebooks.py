@@ -10,7 +10,7 @@ import nbformat
 import pytest
 import torch
 
-from oapo_lite import grid, quoted
+from oapo_lite.study import grid, quoted
 
 import numeric_paths
 
@@ -104,7 +104,7 @@ def typed_budget_errors(notebook: Path) -> list[str]:
     the paper's count), and "X% of HARL's YM" that is no env's share of a figure's steps."""
     import re
 
-    from oapo_lite import experiments
+    from oapo_lite.study import experiments
 
     figures = [f for f in grid.GRID if f.notebook == notebook.stem]
     seeds, shares = set(), set()

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from matplotlib.animation import FuncAnimation
 
-from oapo_lite import plotting
 from oapo_lite.envs import load_maze
+from oapo_lite.study import plotting
 
 
 def _discs(ax):

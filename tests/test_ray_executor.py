@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oapo_lite import experiments, grid
-from oapo_lite.grid import Figure
+from oapo_lite.study import experiments, grid
+from oapo_lite.study.grid import Figure
 
 # The head node lives in its own process (so that other drivers, including a killed one, come
 # and go); it stops when the test closes its stdin.
 HEAD = """
 import sys
-from oapo_lite.executors import connect
+from oapo_lite.study.executors import connect
 ray, _ = connect(None, num_cpus=2, _temp_dir=sys.argv[1], object_store_memory=100 * 2**20)
 print(ray.get_runtime_context().gcs_address, flush=True)
 sys.stdin.read()

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import torch
 
-from oapo_lite import rollout
-from oapo_lite.rollout import Inputs, States, distinct_rows
+from oapo_lite.neural import rollout
+from oapo_lite.neural.rollout import Inputs, States, distinct_rows
 
 
 def unique_by_bytes(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

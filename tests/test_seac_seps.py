@@ -9,14 +9,14 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from oapo_lite import __main__ as cli
-from oapo_lite import seps
-from oapo_lite.a2c import A2C, nstep_returns, seac_loss
 from oapo_lite.envs import make_vec
-from oapo_lite.nets import Actors
-from oapo_lite.config import TrainConfig
-from oapo_lite.rollout import collect
-from oapo_lite.runstate import load_checkpoint
-from oapo_lite.train import train
+from oapo_lite.neural import seps
+from oapo_lite.neural.a2c_family import A2C, nstep_returns, seac_loss
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.rollout import collect
+from oapo_lite.neural.runstate import load_checkpoint
+from oapo_lite.neural.train import train
 
 torch.set_num_threads(1)
 
@@ -204,7 +204,7 @@ def test_seps_groups_two_identical_agents_and_keeps_two_different_ones_apart(tmp
     assert rows["seps_groups"].iloc[0] != rows["seps_groups"].iloc[0]  # NaN: no update before the first row
     assert rows["seps_groups"].iloc[1] == "a+c0+b+c1"  # pre-training: one shared network
     assert rows["seps_groups"].iloc[-1] == "a | c0+c1 | b"
-    learner = load_checkpoint(tmp_path)["a2c"]
+    learner = load_checkpoint(tmp_path)["learner"]
     assert learner["owner"] == [0, 1, 2, 1] and sorted(learner["db_scores"]) == [2, 3]
     z = learner["embeddings"]
     assert np.linalg.norm(z[1] - z[3]) < min(np.linalg.norm(z[0] - z[1]), np.linalg.norm(z[2] - z[1])) / 2

@@ -11,11 +11,11 @@ pytest.importorskip("jaxmarl")
 
 from oapo_lite.envs import registry  # noqa: E402
 from oapo_lite.envs.smax import NOOP, SmaxVec, check  # noqa: E402
-from oapo_lite.nets import Actors  # noqa: E402
-from oapo_lite.config import TrainConfig  # noqa: E402
-from oapo_lite.rollout import sample_actions  # noqa: E402
-from oapo_lite.runstate import load_checkpoint  # noqa: E402
-from oapo_lite.train import train  # noqa: E402
+from oapo_lite.neural.nets import Actors  # noqa: E402
+from oapo_lite.neural.config import TrainConfig  # noqa: E402
+from oapo_lite.neural.rollout import sample_actions  # noqa: E402
+from oapo_lite.neural.runstate import load_checkpoint  # noqa: E402
+from oapo_lite.neural.train import train  # noqa: E402
 
 import fakes
 
@@ -113,7 +113,7 @@ def test_oappo_trains_end_to_end_and_resumes_identically(env, tmp_path):
 def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_path):
     """``grid.SMAX_TUNED`` (Fig. 4's settings on every map) is a valid config for every
     algorithm of Fig. 4, and a MAPPO run with it (4 minibatches) resumes to the same numbers."""
-    from oapo_lite import grid
+    from oapo_lite.study import grid
 
     for algo in grid.SMAX_ALGOS:
         TrainConfig(algo=algo, env="smax:3m", **grid.SMAX_BATCH, **grid.SMAX_TUNED)

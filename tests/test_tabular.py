@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from oapo_lite import exact as ex
 from oapo_lite.envs.maps import load_maze
-from oapo_lite.tabular import TabularConfig, exact_batch, run_tabular, sample_batch, visited
+from oapo_lite.tabular import exact as ex
+from oapo_lite.tabular.algorithm1 import TabularConfig, exact_batch, run_tabular, sample_batch, visited
 
 
 @pytest.fixture(scope="module")

@@ -2,6 +2,8 @@
 import copy
 import dataclasses
 import math
+import sys
+import types
 
 import numpy as np
 import pandas as pd
@@ -11,15 +13,16 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from oapo_lite import __main__ as cli, reuse
+from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import MAPS, MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.nets import Actors, Categorical
-from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors, Categorical
+from oapo_lite.neural.ppo_family import LearnerBatch, learner_dists, policy_distances, update_actors, update_units
+from oapo_lite.neural.rollout import Inputs, Rollout, collect
+from oapo_lite.neural.runstate import load_checkpoint, load_history
+from oapo_lite.neural.train import train
 from oapo_lite.reuse import check_spaces
-from oapo_lite.rollout import Inputs, Rollout, collect
-from oapo_lite.runstate import load_checkpoint, load_history
-from oapo_lite.train import train
-from oapo_lite.update import Sources, learner_dists, policy_distances, update_actors, update_units
 
 import fakes
 
@@ -132,8 +135,10 @@ def test_resuming_with_more_steps_gives_the_rows_of_the_longer_run(tmp_path):
 
 @pytest.mark.parametrize("damage, words", [
     (lambda ck: ck["config"].pop("kl_reduce"), "no config fields ['kl_reduce']"),
-    (lambda ck: ck.pop("critic_opt"), "no entry 'critic_opt'"),
+    (lambda ck: ck["learner"].pop("critic_opt"), "no entry 'critic_opt'"),
     (lambda ck: delattr(ck["step"], "active"), "environment step has no fields ['active']"),
+    # the layout before the learner's state had one key: the PPO family's keys at the top level
+    (lambda ck: ck.update(ck.pop("learner")), "no entry 'learner'"),
 ])
 def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, damage, words):
     cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
@@ -144,6 +149,22 @@ def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, d
     with pytest.raises(ValueError) as err:
         train(dataclasses.replace(cfg, steps=160 * 3), tmp_path, progress=False)
     assert words in str(err.value) and "resume=False" in str(err.value)
+
+
+def test_a_checkpoint_naming_a_moved_module_is_refused_as_older_not_damaged(tmp_path, monkeypatch):
+    """A checkpoint of a SePS run before the layers had folders pickled ``oapo_lite.seps.Buffer``."""
+    cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
+    train(cfg, tmp_path, progress=False)
+    ck = load_checkpoint(tmp_path)
+    old = types.ModuleType("oapo_lite.seps")
+    Buffer = type("Buffer", (), {"__module__": "oapo_lite.seps"})
+    old.Buffer = Buffer
+    monkeypatch.setitem(sys.modules, "oapo_lite.seps", old)
+    ck["learner"]["buffer"] = Buffer()
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    monkeypatch.delitem(sys.modules, "oapo_lite.seps")
+    with pytest.raises(ValueError, match=r"written by an older oapo_lite \(No module named 'oapo_lite.seps'\); start afresh"):
+        train(dataclasses.replace(cfg, steps=160 * 3), tmp_path, progress=False)
 
 
 def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
@@ -248,7 +269,7 @@ def test_entropy_by_weight_changes_only_what_reuse_weights(tmp_path):
 
 def test_sample_mode_trains_each_learner_on_one_source_drawn_from_m(tmp_path, monkeypatch):
     """Algorithm 1 line 5: in "sample" mode W is one-hot per learner, on a source M allows."""
-    import oapo_lite.update as train_module
+    import oapo_lite.neural.ppo_family as train_module
 
     seen = []
     real = train_module.update_actors
@@ -285,7 +306,7 @@ def test_the_factor_is_the_product_of_the_updated_agents_ratios(algo):
     explicit = torch.ones_like(factor)
     with torch.no_grad():
         for k in range(3):
-            src = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
+            src = LearnerBatch(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
             logp_new = actors.head.log_prob(learner_dists(actors, batch.inputs, src)[0], batch.act[k])
             explicit *= torch.exp(logp_new) / torch.exp(batch.logp[k])
     assert not torch.allclose(factor, torch.ones_like(factor))  # the agents did move
@@ -329,13 +350,13 @@ def test_sample_mode_oatrpo_keeps_the_acting_policy_within_delta_on_its_own_obse
     assert not any(math.isnan(k) for k in kls)  # both steps were taken
     with torch.no_grad():
         for k in range(2):
-            own = Sources(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
+            own = LearnerBatch(k, [k], [0], torch.ones(1), batch.act[[k]], batch.logp[[k]], torch.ones(1))
             kl = Categorical.kl(learner_dists(old, batch.inputs, own), learner_dists(actors, batch.inputs, own))
             assert 1e-4 < kl.mean().item() <= delta * (1 + 1e-5)
     # the weights mode keeps Eq. 7's M-weighted KL as written
-    src = Sources.of(0, np.array([0.7, 0.3]), [0], batch)
+    src = LearnerBatch.of(0, np.array([0.7, 0.3]), [0], batch)
     assert torch.equal(src.kl_w, src.w)
-    torch.testing.assert_close(Sources.of(0, W[0], [0], batch).kl_w, torch.ones(2))
+    torch.testing.assert_close(LearnerBatch.of(0, W[0], [0], batch).kl_w, torch.ones(2))
 
 
 @pytest.mark.parametrize("reduce", reuse.KL_REDUCES)
@@ -555,14 +576,14 @@ def test_lr_anneal_falls_linearly_to_zero_and_sets_every_optimiser(tmp_path):
     train(cfg, tmp_path / "run", progress=False)
     assert [h["lr_scale"] for h in load_history(tmp_path / "run")] == [1.0, 0.75, 0.5, 0.25]
     ck = load_checkpoint(tmp_path / "run")  # the optimisers as the last iteration left them: lr / 4
-    assert ck["actor_opt0"]["param_groups"][0]["lr"] == pytest.approx(cfg.lr / 4)
-    assert ck["critic_opt"]["param_groups"][0]["lr"] == pytest.approx(cfg.critic_lr / 4)
+    assert ck["learner"]["actor_opt0"]["param_groups"][0]["lr"] == pytest.approx(cfg.lr / 4)
+    assert ck["learner"]["critic_opt"]["param_groups"][0]["lr"] == pytest.approx(cfg.critic_lr / 4)
     assert not _same(_params(tmp_path, "run"),
                      (_run(tmp_path, "const", algo="mappo", steps=160 * 4, **TINY), _params(tmp_path, "const"))[1])
     seac = TrainConfig(algo="seac", steps=80 * 3, lr_anneal=True, **{**TINY, "rollout_len": 5})
     train(seac, tmp_path / "seac", progress=False)
     assert [h["lr_scale"] for h in load_history(tmp_path / "seac")][-1] == pytest.approx(1 / seac.n_iterations)
-    opt = load_checkpoint(tmp_path / "seac")["a2c"]["a2c"]["opts"][0]
+    opt = load_checkpoint(tmp_path / "seac")["learner"]["a2c"]["opts"][0]
     assert opt["param_groups"][0]["lr"] == pytest.approx(seac.a2c_lr / seac.n_iterations)
 
 
@@ -581,8 +602,8 @@ def test_annealed_run_without_value_norm_resumes_to_the_uninterrupted_numbers(tm
 def test_value_norm_off_regresses_on_raw_returns(tmp_path):
     on = _run(tmp_path, "on", algo="mappo", steps=160 * 3, **TINY)
     off = _run(tmp_path, "off", algo="mappo", steps=160 * 3, value_norm=False, **TINY)
-    assert load_checkpoint(tmp_path / "off")["value_norm"]["debias"] == 0  # never updated
-    assert load_checkpoint(tmp_path / "on")["value_norm"]["debias"] > 0
+    assert load_checkpoint(tmp_path / "off")["learner"]["value_norm"]["debias"] == 0  # never updated
+    assert load_checkpoint(tmp_path / "on")["learner"]["value_norm"]["debias"] > 0
     assert not np.allclose(on["value_loss"].iloc[1:], off["value_loss"].iloc[1:])
     with pytest.raises(ValueError, match="lr_anneal"):
         TrainConfig(lr_anneal=1)
@@ -615,14 +636,14 @@ def test_feature_norm_trains_its_layernorms_and_resumes_to_the_uninterrupted_num
     _assert_same_run(tmp_path, "full", full, "resumed", train(cfg, tmp_path / "resumed", progress=False))
     params = _params(tmp_path, "full")
     assert not torch.equal(params["norms.0.0"], torch.ones_like(params["norms.0.0"]))
-    assert load_checkpoint(tmp_path / "full")["critic"]["net.0.weight"].ndim == 1  # the critic's LayerNorm comes first
+    assert load_checkpoint(tmp_path / "full")["learner"]["critic"]["net.0.weight"].ndim == 1  # the critic's LayerNorm comes first
 
 
 # ---------------------------------------------------------------- live diagnostics (issue 34)
 
 
 def test_update_diagnostics_match_their_closed_forms():
-    from oapo_lite.losses import explained_variance, update_diagnostics
+    from oapo_lite.neural.losses import explained_variance, update_diagnostics
 
     logp_old = torch.log(torch.tensor([0.5, 0.2, 0.4, 0.1]))
     ratio = np.array([1.5, 0.9, 1.0, 0.7])
@@ -641,7 +662,7 @@ def test_update_diagnostics_match_their_closed_forms():
 
 @pytest.mark.parametrize("algo", ["oappo", "oatrpo", "mappo", "seac"])
 def test_the_history_carries_each_learners_diagnostics(tmp_path, algo):
-    from oapo_lite.runstate import load_history
+    from oapo_lite.neural.runstate import load_history
 
     cfg = TrainConfig(algo=algo, env="black_red", n_envs=8, steps=1600, eval_every=2, eval_episodes=4,
                       **({} if ALGOS[algo].a2c else dict(rollout_len=25)))
@@ -664,7 +685,7 @@ def test_tensorboard_scalars_are_the_history_and_change_no_number(tmp_path):
     pytest.importorskip("tensorboard")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from oapo_lite.runstate import load_history
+    from oapo_lite.neural.runstate import load_history
 
     cfg = TrainConfig(algo="oappo", env="black_red", n_envs=8, rollout_len=25, steps=1600, eval_every=2,
                       eval_episodes=4)

@@ -6,8 +6,8 @@ import pytest
 import torch
 from torch.nn.utils import parameters_to_vector
 
-from oapo_lite.nets import Actors
-from oapo_lite.trpo import conjugate_gradient, fisher_vector_product, trpo_step
+from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.trpo import conjugate_gradient, fisher_vector_product, trpo_step
 
 torch.set_num_threads(1)
 

@@ -4,8 +4,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from oapo_lite import grid
-from oapo_lite import verdicts as v
+from oapo_lite.study import grid, statistics, verdicts as v
+from oapo_lite.study.claims import judge
 
 
 def curves(spec, seeds=5, steps=np.arange(0, 100_001, 5_000), noise=0.0):
@@ -27,73 +27,73 @@ def evidence(spec, **kw):
 # --- the statistics against hand computations ---------------------------------------------
 
 def test_iqm_is_the_mean_of_the_middle_half():
-    assert v.iqm(np.array([7.0, 1, 100, 3, 5, 2, 4, 6])) == pytest.approx((3 + 4 + 5 + 6) / 4)
-    assert v.iqm(np.array([0.0, 10, 1, 2, 3])) == pytest.approx((1 + 2 + 3) / 3)  # 5 seeds: middle three
-    assert v.iqm(np.array([[1.0, 2, 3, 4], [10, 20, 30, 400]])).tolist() == pytest.approx([2.5, 25.0])
+    assert statistics.iqm(np.array([7.0, 1, 100, 3, 5, 2, 4, 6])) == pytest.approx((3 + 4 + 5 + 6) / 4)
+    assert statistics.iqm(np.array([0.0, 10, 1, 2, 3])) == pytest.approx((1 + 2 + 3) / 3)  # 5 seeds: middle three
+    assert statistics.iqm(np.array([[1.0, 2, 3, 4], [10, 20, 30, 400]])).tolist() == pytest.approx([2.5, 25.0])
 
 
 def test_probability_of_improvement_known_cases():
     low, high = np.arange(5.0), np.arange(5.0) + 10
-    assert v.probability_of_improvement(high, low) == 1.0  # dominating sample
-    assert v.probability_of_improvement(low, high) == 0.0
-    assert v.probability_of_improvement(low, low) == 0.5  # identical samples
+    assert statistics.probability_of_improvement(high, low) == 1.0  # dominating sample
+    assert statistics.probability_of_improvement(low, high) == 0.0
+    assert statistics.probability_of_improvement(low, low) == 0.5  # identical samples
     # by hand: pairs (x, y) with x > y count 1, ties 1/2: 1 vs {0, 1, 2} -> 1 + .5 + 0; 3 vs it -> 3
-    assert v.probability_of_improvement([1.0, 3.0], [0.0, 1.0, 2.0]) == pytest.approx(4.5 / 6)
+    assert statistics.probability_of_improvement([1.0, 3.0], [0.0, 1.0, 2.0]) == pytest.approx(4.5 / 6)
 
 
 def test_probability_of_improvement_is_the_mann_whitney_statistic():
     rng = np.random.default_rng(1)
     x, y = rng.integers(0, 6, 12).astype(float), rng.integers(0, 6, 9).astype(float)  # with ties
     u = stats.mannwhitneyu(x, y, alternative="greater").statistic
-    assert v.probability_of_improvement(x, y) == pytest.approx(u / (len(x) * len(y)))
+    assert statistics.probability_of_improvement(x, y) == pytest.approx(u / (len(x) * len(y)))
 
 
 def test_degenerate_samples_give_zero_width_intervals_at_the_true_value():
-    est = v.bootstrap_interval(v.iqm, np.full(5, 0.216))
+    est = statistics.bootstrap_interval(statistics.iqm, np.full(5, 0.216))
     assert (est.point, est.low, est.high) == pytest.approx((0.216, 0.216, 0.216))
-    p = v.bootstrap_interval(v.probability_of_improvement, np.full(5, 2.0), np.full(7, 1.0))
+    p = statistics.bootstrap_interval(statistics.probability_of_improvement, np.full(5, 2.0), np.full(7, 1.0))
     assert (p.point, p.low, p.high) == (1.0, 1.0, 1.0)
-    tie = v.bootstrap_interval(v.probability_of_improvement, np.full(5, 1.0), np.full(5, 1.0))
+    tie = statistics.bootstrap_interval(statistics.probability_of_improvement, np.full(5, 1.0), np.full(5, 1.0))
     assert (tie.point, tie.low, tie.high) == (0.5, 0.5, 0.5)
 
 
 def test_dominating_sample_keeps_probability_one_under_resampling():
     rng = np.random.default_rng(2)
-    p = v.bootstrap_interval(v.probability_of_improvement, rng.normal(10, 1, 5), rng.normal(0, 1, 5))
+    p = statistics.bootstrap_interval(statistics.probability_of_improvement, rng.normal(10, 1, 5), rng.normal(0, 1, 5))
     assert (p.point, p.low, p.high) == (1.0, 1.0, 1.0)
 
 
-@pytest.mark.parametrize("statistic", [np.mean, v.iqm])
+@pytest.mark.parametrize("statistic", [np.mean, statistics.iqm])
 def test_bootstrap_interval_covers_a_known_mean(statistic):
     # N(1, 1): mean and IQM both estimate 1 (a symmetric distribution). 300 samples of 20,
     # a 95% interval: the coverage should be near 0.95 (binomial sd 0.013; percentile
     # intervals run a little short at n = 20).
     rng = np.random.default_rng(3)
     hits = [est.low <= 1.0 <= est.high for est in
-            (v.bootstrap_interval(statistic, rng.normal(1.0, 1.0, 20), n_resamples=2000, seed=i) for i in range(300))]
+            (statistics.bootstrap_interval(statistic, rng.normal(1.0, 1.0, 20), n_resamples=2000, seed=i) for i in range(300))]
     assert 0.89 <= np.mean(hits) <= 0.99
 
 
 def test_bootstrap_is_reproducible_and_seeded():
     x = np.random.default_rng(4).normal(size=10)
-    assert v.bootstrap_interval(v.iqm, x) == v.bootstrap_interval(v.iqm, x)
-    assert v.bootstrap_interval(v.iqm, x, seed=1) != v.bootstrap_interval(v.iqm, x, seed=2)
+    assert statistics.bootstrap_interval(statistics.iqm, x) == statistics.bootstrap_interval(statistics.iqm, x)
+    assert statistics.bootstrap_interval(statistics.iqm, x, seed=1) != statistics.bootstrap_interval(statistics.iqm, x, seed=2)
 
 
 def test_one_run_has_no_interval():
-    est = v.bootstrap_interval(v.iqm, [0.5])
+    est = statistics.bootstrap_interval(statistics.iqm, [0.5])
     assert est.point == 0.5 and np.isnan(est.low) and np.isnan(est.high)
     assert "no interval" in est.fmt()
 
 
 def test_bad_confidence_statistic_and_label_raise():
     with pytest.raises(ValueError, match="confidence must lie in"):
-        v.bootstrap_interval(v.iqm, [1.0, 2.0], confidence=95)
+        statistics.bootstrap_interval(statistics.iqm, [1.0, 2.0], confidence=95)
     ev = evidence({"a": (10_000, 1.0)})
     with pytest.raises(ValueError, match="unknown run statistic 'reward'.*final"):
-        ev.values("a", "reward")
+        ev.run_values("a", "reward")
     with pytest.raises(ValueError, match="no runs labelled 'b'"):
-        ev.values("b", "final")
+        ev.run_values("b", "final")
 
 
 # --- per-run numbers and verdicts ---------------------------------------------------------
@@ -159,20 +159,20 @@ def test_stuck_with_some_seeds_escaping_is_direction_only():
 def test_figure_claims_follow_the_data():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
                    "oatrpo": (30_000, 1.0)})
-    assert all(x.held for x in v.claims("fig3b", good))
+    assert all(x.held for x in judge("fig3b", good))
     bad = curves({"mappo": (20_000, 1.0), "happo": (30_000, 1.0), "oappo": (50_000, 1.0),
                   "oatrpo": (90_000, 1.0)})
-    held = {x.claim: x.held for x in v.claims("fig3b", bad)}
+    held = {x.claim: x.held for x in judge("fig3b", bad)}
     assert not held["MAPPO (shared parameters) stays below the optimum"]
     assert not held["OATRPO converges faster than OAPPO"]
-    sentence = v.claims("fig3b", bad)[0].sentence()
+    sentence = judge("fig3b", bad)[0].sentence()
     assert "contradicted" in sentence and "mappo 1.000 [1.000, 1.000]" in sentence
 
 
 def test_claim_table_has_a_row_per_budget_and_claim():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
                    "oatrpo": (30_000, 1.0)})
-    table = v.claim_table({"five": v.claims("fig3b", good), "one": v.claims("fig3b", good[good["seed"] == 0])})
+    table = v.claim_table({"five": judge("fig3b", good), "one": judge("fig3b", good[good["seed"] == 0])})
     assert len(table) == 2 * len(grid.get_figure("fig3b").claims)
     by = table.set_index("budget")
     assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
@@ -212,7 +212,7 @@ def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
 
 def test_unknown_figure_raises():
     with pytest.raises(ValueError, match="fig9"):
-        v.claims("fig9", curves({"a": (1, 1.0)}))
+        judge("fig9", curves({"a": (1, 1.0)}))
 
 
 def win_curves(spec, seeds=5, env="smax:2s3z"):
@@ -233,18 +233,18 @@ def test_stabler_compares_the_largest_drop_below_an_earlier_peak():
 
 def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     learned = {"oappo": [0, 0.6, 0.9, 0.9], "mappo": [0, 0.1, 0.2, 0.3], "happo": [0, 0.1, 0.6, 0.7]}
-    out = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned))}
+    out = {x.claim: x for x in judge("fig4_smax", win_curves(learned))}
     assert out["2s3z: OAPPO (a net per agent) ends above MAPPO (heterogeneous agents)"].held
     assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].held
     assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_TESTABLE  # no run on that map
     assert out["2s3z: OAPPO (a net per kind) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
     nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
-    assert {x.status for x in v.claims("fig4_smax", nothing)} == {v.NOT_TESTABLE}
-    one_seed = {x.claim: x for x in v.claims("fig4_smax", win_curves(learned, seeds=1))}
+    assert {x.status for x in judge("fig4_smax", nothing)} == {v.NOT_TESTABLE}
+    one_seed = {x.claim: x for x in judge("fig4_smax", win_curves(learned, seeds=1))}
     verdict = one_seed["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"]
     assert verdict.status == v.NOT_TESTABLE and "fewer than 2 seeds" in verdict.reason
     never_half = win_curves({"oappo": [0, 0.2, 0.3, 0.4], "happo": [0, 0.1, 0.3, 0.3], "mappo": [0, 0.1, 0.1, 0.1]})
-    out = {x.claim: x for x in v.claims("fig4_smax", never_half)}
+    out = {x.claim: x for x in judge("fig4_smax", never_half)}
     assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].status == v.NOT_TESTABLE
     assert out["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE
 
@@ -253,16 +253,16 @@ def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data
     # App. A: HAPPO plateaus at 1000, MAPPO at 400 (and OAPPO at 900); SEAC has no runs
     df = curves({"happo": (50_000, 1000.0), "mappo": (50_000, 400.0), "oappo": (50_000, 900.0)}, noise=0.1)
     df = df.rename(columns={"frac_opt": "eval_return"}).assign(frac_opt=np.nan)
-    verdicts = {x.claim: x for x in v.claims("figA_mamujoco", df)}
+    verdicts = {x.claim: x for x in judge("figA_mamujoco", df)}
     assert verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].held
     assert "final evaluation return, IQM [95% CI]: happo 1000.000" in verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].evidence
     assert verdicts["OAPPO (a net per agent) ends above full sharing (MAPPO)"].held
     seac = verdicts["direct reuse (SEAC) ends below no reuse (HAPPO)"]
     assert seac.status == v.NOT_TESTABLE and "seac (0)" in seac.reason and not seac.held
     swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))
-    assert not {x.claim: x for x in v.claims("figA_mamujoco", swapped)}[
+    assert not {x.claim: x for x in judge("figA_mamujoco", swapped)}[
         "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
-    assert all(x.status == v.NOT_TESTABLE for x in v.claims("figA_mamujoco", pd.DataFrame()))
+    assert all(x.status == v.NOT_TESTABLE for x in judge("figA_mamujoco", pd.DataFrame()))
 
 
 def test_grf_claims_are_judged_per_scenario_on_the_score():
@@ -270,7 +270,7 @@ def test_grf_claims_are_judged_per_scenario_on_the_score():
             for scenario, spec in {"3_vs_1_with_keeper": {"happo": [0, 0.5, 0.95, 0.97]},
                                    "counterattack_easy": {"oappo": [0, 0.4, 0.8, 0.8], "mappo": [0, 0.1, 0.2, 0.2]}}.items()
             for label, wins in spec.items() for seed in range(5) for k, w in enumerate(wins)]
-    out = {x.claim: x for x in v.claims("fig6b", pd.DataFrame(rows))}
+    out = {x.claim: x for x in judge("fig6b", pd.DataFrame(rows))}
     assert out["3_vs_1_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].held
     assert out["counterattack_easy: OAPPO ends above MAPPO"].held
     assert "final score" in out["counterattack_easy: OAPPO ends above MAPPO"].evidence
@@ -299,7 +299,7 @@ def flat(level, seeds=5, steps=np.arange(0, 100_001, 5_000), lucky=None):
 
 def test_a_flat_curve_is_not_testable_and_says_which_curve():
     df = _fig3b({"mappo": flat(-0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
-    out = {x.claim: x for x in v.claims("fig3b", df)}
+    out = {x.claim: x for x in judge("fig3b", df)}
     stuck = out["MAPPO (shared parameters) stays below the optimum"]
     assert stuck.status == v.NOT_TESTABLE  # below the optimum, but because it learned nothing
     assert "mappo did not learn (initial -0.5, final -0.5: gain +0 +- 0 s.e. over 5 seeds, not above 2 s.e.)" in stuck.reason
@@ -313,7 +313,7 @@ def test_one_lucky_evaluation_is_not_learning():
     ev = v.Evidence(df)
     assert ev.runs.loc[ev.runs["label"] == "mappo", "peak"].max() == 1.0
     assert not v.learned(ev, "mappo")
-    assert v.claims("fig3b", df)[0].status == v.NOT_TESTABLE
+    assert judge("fig3b", df)[0].status == v.NOT_TESTABLE
     # one seed that ends high among flat ones: a gain within noise over seeds is not learning
     one_seed = flat(-0.5)
     one_seed.loc[(one_seed["seed"] == 0) & (one_seed["step"] >= 90_000), "frac_opt"] = 1.0
@@ -414,7 +414,7 @@ def test_a_claim_about_oappo_is_no_test_of_reuse_when_its_gate_closed_early():
     # first 2 evaluations (0 and 5k): 2 of the 11 up to its threshold, 18% < 25%
     base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
     closed = with_reuse(base, {"oappo": lambda s: s <= 5_000, "oatrpo": lambda s: True})
-    out = {x.claim: x for x in v.claims("fig3b", closed)}
+    out = {x.claim: x for x in judge("fig3b", closed)}
     verdict = out["OAPPO converges faster than HAPPO"]
     assert verdict.status == v.NOT_REUSE
     assert verdict.reason == ("the gate last opened at 5,000 steps; oappo reused at 18% of its evaluated iterations "
@@ -425,7 +425,7 @@ def test_a_claim_about_oappo_is_no_test_of_reuse_when_its_gate_closed_early():
     assert out["OATRPO converges faster than HAPPO"].status == v.REPRODUCED
     # a gate open at every evaluation makes the same data a test of reuse
     opened = with_reuse(base, {"oappo": lambda s: True, "oatrpo": lambda s: True})
-    assert {x.claim: x for x in v.claims("fig3b", opened)}["OAPPO converges faster than HAPPO"].status == v.REPRODUCED
+    assert {x.claim: x for x in judge("fig3b", opened)}["OAPPO converges faster than HAPPO"].status == v.REPRODUCED
 
 
 def test_reuse_is_counted_while_the_curve_learns_and_at_least_a_quarter_is_enough():
@@ -463,7 +463,7 @@ def test_only_claims_that_eq9_reuse_beats_another_algorithm_need_reuse():
 def test_not_testable_comes_before_not_a_test_of_reuse():
     df = with_reuse(_fig3b({"mappo": (90_000, 0.6), "happo": flat(-0.5), "oappo": (50_000, 1.0),
                             "oatrpo": (30_000, 1.0)}), {})
-    out = {x.claim: x for x in v.claims("fig3b", df)}
+    out = {x.claim: x for x in judge("fig3b", df)}
     assert out["OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
     assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
 

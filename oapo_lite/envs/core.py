@@ -1,10 +1,8 @@
 """The maze game, vectorised: N copies of one maze stepped at once with numpy.
 
-Rules: every seat starts on its start cell and moves through ``maze.next_cell``. The team
-reward of a step is ``(1/n) * sum_k [1{k reaches the star now} - STEP_COST * 1{k was not on
-the star before the step}]``; an agent on the star stays there and pays nothing. An episode
-terminates when every agent is on the star and is truncated after ``max_steps`` steps. Ended
-copies reset at once (auto-reset); nothing is random.
+The rules are ``maps``' (the move rule and the reward): every seat starts on its start cell and
+moves through ``maze.next_cell``; an episode terminates when every agent is on the star and is
+truncated after ``max_steps`` steps. Ended copies reset at once (auto-reset); nothing is random.
 """
 from __future__ import annotations
 
@@ -12,10 +10,9 @@ import functools
 
 import numpy as np
 
-from .maps import ACTIONS, N_ACTIONS, Maze, load_maze
-from .vec import VecStep
-
-STEP_COST = 0.01
+from .maps import ACTIONS, N_ACTIONS, STEP_COST, Maze, load_maze
+from .oracle import optimal_return
+from .vec import VecStep, check_copies
 
 
 def as_maze(maze: Maze | str) -> Maze:
@@ -40,12 +37,8 @@ class VecMaze:
     def __init__(self, maze: Maze, n_envs: int, max_steps: int = 50, copy: bool = True):
         if not isinstance(maze, Maze):
             raise TypeError(f"VecMaze needs a Maze, got {type(maze).__name__}; use make_vec for a map name or text")
-        if int(n_envs) != n_envs or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
-        if int(max_steps) != max_steps or max_steps < 1:
-            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         self.maze = maze
-        self.n_envs, self.max_steps = int(n_envs), int(max_steps)
+        self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
         self.agents = self.agent_types = self.maze.agents  # a maze names its seats by their type
         self.n_agents = self.maze.n_agents
         self.n_actions = N_ACTIONS
@@ -74,8 +67,6 @@ class VecMaze:
     @functools.cached_property
     def optimum(self) -> float:
         """The best team return (the search oracle's), which evaluations are measured against."""
-        from .oracle import optimal_return  # the oracle reads this module's rules
-
         return optimal_return(self.maze)
 
     def _reset_all(self) -> None:

@@ -1,4 +1,4 @@
-"""Google Research Football (``gfootball``) academy scenarios behind the ``VecStep`` interface.
+"""Google Research Football (``gfootball``) academy scenarios behind the ``VecEnv`` interface (``envs.vec``).
 
 As in HARL's GRF setup (PKU-MARL/HARL): one controlled left-team player per agent, ``simple115v2``
 observations, ``scoring,checkpoints`` rewards, the team reward (the mean of the players'
@@ -24,7 +24,7 @@ import weakref
 
 import numpy as np
 
-from .vec import VecStep
+from .vec import VecStep, check_copies
 
 # scenario -> number of controlled left players (= agents), HARL's choice
 SCENARIOS = {
@@ -168,11 +168,8 @@ class GRFVec:
         check(name)
         if not installed():
             raise NotInstalled(f"env grf:{name}: {INSTALL_HINT}")
-        if int(n_envs) != n_envs or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
-        if int(max_steps) != max_steps or max_steps < 1:
-            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-        self.name, self.n_envs, self.seed, self.max_steps = name, int(n_envs), int(seed), int(max_steps)
+        self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
+        self.name, self.seed = name, int(seed)
         self.n_agents = SCENARIOS[name]
         self.agents = tuple(f"player_{k}" for k in range(self.n_agents))
         self.agent_types = self.agents  # HARL's players keep their own roles

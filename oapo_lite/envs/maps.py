@@ -20,6 +20,9 @@ Terrain symbols (who may stand on them):
 
 Actions are 0 up, 1 down, 2 left, 3 right, 4 nop. A move into a cell the agent may
 not stand on (or off the grid) leaves it where it is. An agent on the star stays there.
+
+The team reward of a step is ``(1/n) * sum_k [1{k reaches the star now} - STEP_COST * 1{k was
+not on the star before the step}]``: an agent on the star pays nothing.
 """
 from __future__ import annotations
 
@@ -39,6 +42,7 @@ ALLOWED = {
 ACTIONS = ("up", "down", "left", "right", "nop")
 MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)])
 N_ACTIONS = len(ACTIONS)
+STEP_COST = 0.01
 
 MAPS = {
     # Red detours left through red cells, black right through black cells; both then

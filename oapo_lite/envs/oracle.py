@@ -9,8 +9,7 @@ from collections import deque
 
 import numpy as np
 
-from .core import STEP_COST
-from .maps import Maze
+from .maps import STEP_COST, Maze
 
 
 def distances(maze: Maze) -> np.ndarray:

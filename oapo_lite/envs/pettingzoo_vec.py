@@ -1,4 +1,4 @@
-"""Any PettingZoo ``ParallelEnv`` behind the ``VecStep`` interface of the maze core.
+"""Any PettingZoo ``ParallelEnv`` behind the ``VecEnv`` interface (``envs.vec``).
 
 The generic path: ``n_envs`` copies stepped one after another (environments we do not own
 cannot be vectorised for them). Agents come in ``possible_agents`` order; the team reward
@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 from gymnasium import spaces
 
-from .vec import VecStep
+from .vec import VecStep, check_copies
 
 
 def _flat_obs(obs) -> tuple[np.ndarray, np.ndarray | None]:
@@ -48,10 +48,9 @@ class PettingZooVec:
     """
 
     def __init__(self, env_fn: Callable[[], object], n_envs: int, seed: int = 0, max_steps: int | None = None):
-        if int(n_envs) != n_envs or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
-        self.envs = [env_fn() for _ in range(int(n_envs))]
-        self.n_envs, self.seed, self.max_steps = int(n_envs), int(seed), max_steps
+        self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
+        self.envs = [env_fn() for _ in range(self.n_envs)]
+        self.seed = int(seed)
         first = self.envs[0]
         self.agents = tuple(first.possible_agents)
         # every seat its own kind unless the env says otherwise (``agent_types``: one name per seat)

@@ -1,4 +1,4 @@
-"""SMAX (JaxMARL's JAX re-implementation of SMAC) behind the ``VecStep`` interface.
+"""SMAX (JaxMARL's JAX re-implementation of SMAC) behind the ``VecEnv`` interface (``envs.vec``).
 
 ``n_envs`` copies of one scenario against SMAX's heuristic enemy are stepped by ONE jitted,
 vmapped call (auto-reset inside it); its outputs come back as one pytree of host arrays
@@ -27,18 +27,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .vec import VecStep
+from .vec import VecStep, check_copies
 
 # SMAX's own scenarios (jaxmarl 0.2.0), and stand-ins registered here: unit types by index
 # (0 marine, 1 marauder, 2 stalker, 3 zealot, 4 zergling, 5 hydralisk), allies then enemies.
-SMAX_MAPS = ("3m", "2s3z", "25m", "3s5z", "8m", "5m_vs_6m", "10m_vs_11m", "27m_vs_30m", "3s5z_vs_3s6z",
+SCENARIOS = ("3m", "2s3z", "25m", "3s5z", "8m", "5m_vs_6m", "10m_vs_11m", "27m_vs_30m", "3s5z_vs_3s6z",
              "3s_vs_5z", "6h_vs_8z", "smacv2_5_units", "smacv2_10_units", "smacv2_20_units")
 STANDINS = {
     # SMAC's MMM2 is 1 medivac, 2 marauders, 7 marines against 1 medivac, 3 marauders,
     # 8 marines. SMAX has no medivac (no healing), so both medivacs are dropped.
     "MMM2_like_7m2M_vs_8m3M": ((0,) * 7 + (1,) * 2, (0,) * 8 + (1,) * 3),
 }
-MAPS = SMAX_MAPS + tuple(STANDINS)
+MAPS = SCENARIOS + tuple(STANDINS)
 NOOP = 4  # SMAX's "stop": the only action of a dead unit
 
 
@@ -183,11 +183,8 @@ class SmaxVec:
     """
 
     def __init__(self, name: str, n_envs: int, seed: int = 0, max_steps: int = 100):
-        if int(n_envs) != n_envs or n_envs < 1:
-            raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
-        if int(max_steps) != max_steps or max_steps < 1:
-            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-        self.n_envs, self.seed, self.max_steps = int(n_envs), int(seed), int(max_steps)
+        self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
+        self.seed = int(seed)
         self._c = compiled(name, self.max_steps)
         env = self._c.env
         self.name = name

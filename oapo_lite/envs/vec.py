@@ -1,22 +1,12 @@
 """What every engine gives the training loop: a vector of ``n_envs`` copies of one game, with
-auto-reset, and the record ``VecStep`` that its ``reset`` and ``step`` return.
-
-A vector env has ``n_envs``, ``agents`` (seat names), ``agent_types`` (the kind of each seat:
-seats of one kind may share a network, ``TrainConfig.networks``), ``n_agents``, ``n_actions`` (per seat;
-the size of a Box action), ``obs_dim``, ``state_dim`` (the centralised critic's input),
-``continuous`` (Box actions: a Gaussian policy), ``time_in_state`` (its state carries the time
-left, so hitting the time limit is part of the game: no bootstrap there) and ``optimum`` (the
-best team return, when an oracle knows it; NaN otherwise); ``reset()`` and ``step(actions)``
-(actions ``(n_envs, n_agents[, n_actions])``) return a ``VecStep``; ``get_state()`` /
-``set_state(state)`` save and restore everything random or running, for checkpoints. The
-arrays of a step may be overwritten by the next step: the loop copies what it keeps. An env
-whose copies each cost an engine's CPU may also offer ``step_only(actions, which)``: a step of
-the copies where ``which`` (n_envs,) is true alone, zeros and no ended episode in the others'
-rows; the evaluation then stops the copies whose first episode has ended.
+auto-reset (``VecEnv``), the record ``VecStep`` that its ``reset`` and ``step`` return, and the
+checks every engine's constructor shares (``check_copies``). The arrays of a step may be
+overwritten by the next step: the loop copies what it keeps.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -44,3 +34,55 @@ class VecStep:
         no, nan = np.zeros(n_envs, dtype=bool), np.full(n_envs, np.nan, dtype=np.float32)
         return cls(obs, state, avail, np.zeros(n_envs, dtype=np.float32), no, no.copy(), obs.copy(), state.copy(),
                    nan, nan.copy(), active)
+
+
+class VecEnv(Protocol):
+    """An engine as the loop sees it."""
+
+    n_envs: int
+    agents: list[str]  # seat names
+    agent_types: list[str]  # the kind of each seat: seats of one kind may share a network (TrainConfig.networks)
+    n_agents: int
+    n_actions: int  # per seat; the size of a Box action
+    obs_dim: int
+    state_dim: int  # the centralised critic's input
+    continuous: bool  # Box actions: a Gaussian policy
+    time_in_state: bool  # the state carries the time left: the time limit is part of the game, no bootstrap there
+    optimum: float  # the best team return where an oracle knows it; NaN otherwise
+
+    def reset(self) -> VecStep: ...
+
+    def step(self, actions: np.ndarray) -> VecStep:
+        """``actions`` (n_envs, n_agents[, n_actions])."""
+
+    def get_state(self) -> object:
+        """Everything random or running, for checkpoints."""
+
+    def set_state(self, state: object) -> None: ...
+
+
+@runtime_checkable
+class StepsSomeCopies(Protocol):
+    """Optional: an env whose copies each cost an engine's CPU (GRF) may step some copies alone,
+    with zeros and no ended episode in the others' rows; the evaluation then stops the copies
+    whose first episode has ended."""
+
+    def step_only(self, actions: np.ndarray, which: np.ndarray) -> VecStep:
+        """A step of the copies where ``which`` (n_envs,) is true."""
+
+
+@runtime_checkable
+class HasSeatSpaces(Protocol):
+    """Optional: an env whose seats may differ in their spaces (a PettingZoo env) names them, so
+    that reuse between two seats can be refused where they differ (``reuse.check_spaces``)."""
+
+    spaces: tuple  # per seat: (observation space, action space)
+
+
+def check_copies(n_envs, max_steps=None) -> tuple[int, int | None]:
+    """``n_envs`` and ``max_steps`` (None: the engine's own limit) as integers, or a ValueError
+    naming the bad one: the checks every engine's constructor makes first."""
+    for name, value in (("n_envs", n_envs), ("max_steps", max_steps)):
+        if value is not None and (int(value) != value or value < 1):
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(n_envs), None if max_steps is None else int(max_steps)

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import pandas as pd
 
-from oapo_lite import experiments, grid, store, verdicts
+from oapo_lite import store
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
-from oapo_lite.config import TrainConfig
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.study import experiments, grid, verdicts
 
 LAMBDAS = grid.LAMBDAS
 ADAPTIVE = grid.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
@@ -121,10 +122,10 @@ def adaptive_vs_best_fixed(df: pd.DataFrame, adaptive: str = ADAPTIVE) -> pd.Dat
         fixed = [c for c in fixed_curves() if c in ev.summary.index]
         best = min(fixed, key=lambda c: (ev.level(c, "steps").point, -ev.level(c, "final").point))
         p, p_happo = (ev.improvement(adaptive, other, "steps") for other in (best, "happo"))
-        stuck = {c: int((ev.values(c, "final") < ev.threshold).sum()) for c in (adaptive, best, "happo")}
+        stuck = {c: int((ev.run_values(c, "final") < ev.threshold).sum()) for c in (adaptive, best, "happo")}
         rows[name] = {"best_fixed": best, "p_faster": p.point, "low": p.low, "high": p.high,
                       "p_vs_happo": p_happo.point, "low_happo": p_happo.low, "high_happo": p_happo.high,
                       "adaptive_steps": ev.level(adaptive, "steps").point, "best_steps": ev.level(best, "steps").point,
                       "trapped_adaptive": stuck[adaptive], "trapped_best": stuck[best], "trapped_happo": stuck["happo"],
-                      "seeds": len(ev.values(adaptive, "final"))}
+                      "seeds": len(ev.run_values(adaptive, "final"))}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")

@@ -10,23 +10,24 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from oapo_lite.config import TrainConfig
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.nets import Actors
+from oapo_lite.envs.vec import StepsSomeCopies, VecEnv
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.nets import Actors
 
 
-def make_env(cfg: TrainConfig, n_envs: int, seed: int):
+def make_env(cfg: TrainConfig, n_envs: int, seed: int) -> VecEnv:
     if cfg.env_fn is not None:
         return PettingZooVec(cfg.env_fn, n_envs, seed=seed, max_steps=cfg.max_steps)
     return env_registry.make_vec(cfg.env, n_envs, seed, cfg.max_steps)
 
 
 
-def _per_agent(x: np.ndarray, seat_axis: int) -> np.ndarray:
-    """(T, N, n, ...) or (T, n, N, ...) rollout array -> (n, T * N, ...): sample b = t * N + env."""
-    x = np.moveaxis(x, seat_axis, 0)
-    return x.reshape(x.shape[0], -1, *x.shape[3:])
+def _per_seat(x: np.ndarray) -> np.ndarray:
+    """(T, n, N, ...) rollout buffer -> (n, T * N, ...): the batch's one layout, seat-major, in
+    which sample b of a seat is step t = b // N of env copy b % N."""
+    return x.swapaxes(0, 1).reshape(x.shape[1], -1, *x.shape[3:])
 
 
 @dataclass
@@ -114,6 +115,10 @@ def _rows_equal(raw: np.ndarray, rows: np.ndarray, chunk: int = 512) -> bool:
 
 @dataclass
 class Rollout:
+    """One iteration's samples of every seat in one layout: per-seat fields are (n, B) with
+    B = T * N, and sample b of any seat is step b // N of env copy b % N; per-step fields are
+    (T, N) or (T + 1, N)."""
+
     inputs: Inputs
     act: torch.Tensor  # (n, B) or (n, B, D)
     logp: torch.Tensor  # (n, B) behaviour log-probabilities
@@ -142,25 +147,27 @@ def sample_actions(actors: Actors, weights, step, gen: torch.Generator) -> tuple
     return a, actors.head.log_prob(d, a)
 
 
-def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch.Generator):
+def collect(env: VecEnv, step, actors: Actors, owner: list[int], length: int, gen: torch.Generator):
     """Run every seat's actor in one batched forward per step for ``length`` steps. Returns the
     batch and the envs' last step (where the next rollout starts)."""
     N, n, continuous = env.n_envs, env.n_agents, actors.head.continuous
-    obs = np.empty((length, N, n, env.obs_dim), np.float32)
-    avail = np.empty((length, N, n, env.n_actions), bool)
+    # every per-seat buffer is (step, seat, env copy): the envs give (copy, seat), the actors act seat-major
+    obs = np.empty((length, n, N, env.obs_dim), np.float32)
+    avail = np.empty((length, n, N, env.n_actions), bool)
     state = np.empty((length + 1, N, env.state_dim), np.float32)
     final_state = np.empty((length, N, env.state_dim), np.float32)
     reward = np.empty((length, N), np.float32)
     term, trunc = np.empty((length, N), bool), np.empty((length, N), bool)
-    active = np.empty((length, N, n), bool)
-    # numpy buffers, like the others: a step's writes into torch tensors cost several times more
+    active = np.empty((length, n, N), bool)
+    # numpy buffers: a step's writes into torch tensors cost several times more
     act = np.empty((length, n, N, env.n_actions), np.float32) if continuous else np.empty((length, n, N), np.int64)
     logp = np.empty((length, n, N), np.float32)
     returns, seconds = [], {"policy": 0.0, "env": 0.0}
     with torch.inference_mode():
         weights = actors.stack(owner)
         for t in range(length):
-            obs[t], avail[t], state[t], active[t] = step.obs, step.avail, step.state, step.active
+            obs[t], avail[t], active[t] = (x.swapaxes(0, 1) for x in (step.obs, step.avail, step.active))
+            state[t] = step.state
             tic = time.perf_counter()
             act[t], logp[t] = (x.numpy() for x in sample_actions(actors, weights, step, gen))
             toc = time.perf_counter()
@@ -170,26 +177,26 @@ def collect(env, step, actors: Actors, owner: list[int], length: int, gen: torch
             reward[t], term[t], trunc[t], final_state[t] = step.reward, step.terminated, step.truncated, step.final_state
             returns += step.episode_return[~np.isnan(step.episode_return)].tolist()
     state[length] = step.state
-    batch = Rollout(Inputs.of(_per_agent(obs, 2), _per_agent(avail, 2)),
-                    *(torch.from_numpy(_per_agent(x, 1)) for x in (act, logp)),
+    batch = Rollout(Inputs.of(_per_seat(obs), _per_seat(avail)),
+                    *(torch.from_numpy(_per_seat(x)) for x in (act, logp)),
                     *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
-                    None if active.all() else torch.from_numpy(_per_agent(active, 2)), returns, seconds)
+                    None if active.all() else torch.from_numpy(_per_seat(active)), returns, seconds)
     return batch, step
 
 
 
-def episode_scores(actors: Actors, owner: list[int], env, gen: torch.Generator, max_steps: int) -> tuple[float, float]:
+def episode_scores(actors: Actors, owner: list[int], env: VecEnv, gen: torch.Generator, max_steps: int) -> tuple[float, float]:
     """Mean return and success rate of the first episode of every copy, stochastic policies."""
     step = env.reset()
     ret, success = np.full(env.n_envs, np.nan), np.full(env.n_envs, np.nan)
     # an env that steps copies one by one (GRF) can leave those whose first episode ended
-    step_only = getattr(env, "step_only", None)
+    some = isinstance(env, StepsSomeCopies)
     with torch.inference_mode():
         weights = actors.stack(owner)
         for _ in range(max_steps):
             # every copy's action is drawn, so the generator's draws do not depend on who still plays
             actions = sample_actions(actors, weights, step, gen)[0].transpose(0, 1).numpy()
-            step = env.step(actions) if step_only is None else step_only(actions, np.isnan(ret))
+            step = env.step_only(actions, np.isnan(ret)) if some else env.step(actions)
             first = np.isnan(ret) & ~np.isnan(step.episode_return)
             ret[first], success[first] = step.episode_return[first], step.episode_success[first]
             if not np.isnan(ret).any():

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from oapo_lite.config import ALGOS, TrainConfig
+from oapo_lite.algorithms import ALGOS
+from oapo_lite.neural.a2c_family import beside_ppo
+from oapo_lite.neural.config import TrainConfig
 from oapo_lite.reuse import KL_REDUCES, SCHEMES
-from oapo_lite.verdicts import (FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, reliable,
+from oapo_lite.study.verdicts import (FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, reliable,
                                 stabler, stuck)
 
 
@@ -58,11 +60,6 @@ LAMBDAS = (0.2, 0.4, 0.7, 1.0)
 # Within a sharing group every member's experience weighs the same, as in MAPPO's M = 1/n:
 # lambda = 1 / group size (NR's learners keep everything for themselves anyway).
 SCHEME_LAM = {"NR": 1.0, "UR": 1 / 2, "RR": 1 / 2, "AR": 1 / 3}
-# SEAC / SePS (A2C, 5-step rollouts) run 16 env copies: 80 env steps an update, 20 updates per
-# PPO iteration of 32 x 50 steps; their evaluations and checkpoints are spaced 20 x as many
-# iterations apart, so every curve is evaluated at the same env steps. SePS pre-trains for the
-# first tenth of the budget, counted in its env steps.
-A2C_ENVS = 16
 BASELINE_ALGOS = ("seac", "seps", "mappo", "happo", "oappo")
 MAZES = ("black_red", "black_blue_red")
 ADAPTIVE_CURVES = (("oappo adaptive", dict(algo="oappo", reuse_adapt="gradient_test")),
@@ -81,7 +78,7 @@ class Figure:
     budget; ``runs_at``: the budgets the figure has runs at (None: every budget); ``cpus``,
     ``gpus``, ``memory_gb``: what one run asks a Ray cluster for. ``metric``: what its curves
     measure; ``claims``: the paper's claims about it, as (test, the curves it compares, the
-    claim), judged by ``verdicts.claims``; with ``claims_per_env`` (the prefix of the ``env``
+    claim), judged by ``claims.judge``; with ``claims_per_env`` (the prefix of the ``env``
     column) each claim starts with the env it is judged on, on that env's runs alone.
     ``section`` and ``notebook``: where the paper and this repository show it; ``reference``:
     whose steps its ``paper`` budget is ("": the paper gives none, the budget is ours).
@@ -132,7 +129,7 @@ SMAX_TUNED = dict(lr=2e-3, critic_lr=2e-3, ppo_epochs=4, n_minibatch=4, entropy_
 # (benchmarks/smax_anchor.py is the recipe)
 SMAX_ANCHOR = {"3m": (295_000, 0.72), "2s3z": (500_000, 0.97)}
 # the small maps first (they learn within a CPU budget), then the paper's
-SMAX_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+FIG4_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 # the paper's heterogeneous maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is
 # heterogeneous too and small enough to learn on a CPU
 SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
@@ -226,7 +223,7 @@ def smax_curves(m: str) -> tuple:
               **{a: dict(algo=a, a2c_lr=lr, entropy_coef=ent) for a, (lr, ent) in A2C_CHOSEN.items()}}
     if m not in SMAX_HETEROGENEOUS:
         del curves["oappo type"]
-    keep = LONG_SMAX_CURVES if m in SMAX_MAPS[3:] else curves
+    keep = LONG_SMAX_CURVES if m in FIG4_MAPS[3:] else curves
     return tuple((label, dict(kw, env=f"smax:{m}")) for label, kw in curves.items() if label in keep)
 
 
@@ -266,7 +263,7 @@ ENGINE_BUDGETS = ("smoke", "cpu", "paper")
 SIGMA_REASONS = ("own experience only is slower", "irrelevant experience confuses", "all peers' experience hinders")
 LAM_02, LAM_04, LAM_07, LAM_1 = LAMBDAS
 # Section 6.2 (Fig. 4) on SMAX, per map and reading of OAPPO
-SMAX_CLAIMS = [c for m in SMAX_MAPS for c in _smax_claims(m)]
+SMAX_CLAIMS = [c for m in FIG4_MAPS for c in _smax_claims(m)]
 # Section 6.3 (Fig. 6b) on GRF, per scenario: individual experience suffices on the two simple
 # tasks (HAPPO, own experience only, nearly perfect); OAPPO and OATRPO are best on the
 # counterattacks (each ends above every other algorithm of the table).
@@ -336,10 +333,10 @@ GRID = (
            common=dict(env="black_red"), notebook="17_adaptive_reuse"),
     # label: the algorithm or reading (``smax_curves``); the map is the ``env`` column. ``cpu``:
     # the small maps and the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) at 5 seeds;
-    # 3s5z_vs_3s6z at 3M (15%; the separate nets learn 2.6-3.1x slower than MAPPO, which first
-    # wins there at about 500k) for its three curves at 3 seeds (ASSUMPTIONS.md); the MMM2 stand-in
+    # 3s5z_vs_3s6z at 3M (15%; the separate nets learn several times slower than MAPPO there)
+    # for its three curves at 3 seeds (ASSUMPTIONS.md); the MMM2 stand-in
     # and the paper's steps run at ``paper``.
-    Figure("fig4_smax", tuple(c for m in SMAX_MAPS for c in smax_curves(m)),
+    Figure("fig4_smax", tuple(c for m in FIG4_MAPS for c in smax_curves(m)),
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
                "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
@@ -418,9 +415,9 @@ GRID = (
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
-    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: the training loop ran
-    # ~60 env steps/s per run here (a 96k-step OAPPO run took 28 min beside a SMAX run, so 18
-    # runs of 32k steps on 3_vs_1_with_keeper (the scenario HARL learns fastest) fit 2 hours.
+    # label: the algorithm; the scenario is the ``env`` column. ``cpu``: what 2 cores train in
+    # about 2 hours, on 3_vs_1_with_keeper alone (the scenario HARL learns fastest; the speed is
+    # benchmarks/grf_speed.py's, the sizing ASSUMPTIONS.md's).
     Figure("fig6b", tuple((a, dict(algo=a, env=f"grf:academy_{s}")) for s in GRF_SCENARIOS for a in FIG6B_ALGOS),
            runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(steps=160, eval_episodes=2, config=dict(n_envs=2, rollout_len=16, max_steps=32),
@@ -479,17 +476,10 @@ def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
 
 
 def _config(b: Budget, **kw) -> TrainConfig:
-    """A run's config at budget ``b``; A2C runs are evaluated and checkpointed at the same env
-    steps as the PPO family's (see ``A2C_ENVS``)."""
-    kw = {**b.config, **kw}
-    if not ALGOS[kw["algo"]].a2c:
-        return TrainConfig(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes, **kw)
-    batch = kw.get("n_envs", TrainConfig.n_envs) * kw.get("rollout_len", TrainConfig.rollout_len)
-    ratio = max(1, batch // (A2C_ENVS * TrainConfig.n_step))
-    if kw["algo"] == "seps":
-        kw["seps_pretrain_steps"] = max(b.steps // 10, A2C_ENVS * TrainConfig.n_step)  # >= one update
-    kw |= dict(n_envs=A2C_ENVS, checkpoint_every=kw.get("checkpoint_every", TrainConfig.checkpoint_every) * ratio)
-    return TrainConfig(steps=b.steps, eval_every=b.eval_every * ratio, eval_episodes=b.eval_episodes, **kw)
+    """A run's config at budget ``b``; A2C runs take the shape that evaluates them at the PPO
+    family's env steps (``a2c_family.beside_ppo``)."""
+    kw = {**b.config, **kw, "steps": b.steps, "eval_every": b.eval_every, "eval_episodes": b.eval_episodes}
+    return TrainConfig(**(beside_ppo(kw) if ALGOS[kw["algo"]].a2c else kw))
 
 
 def figure_runs(figure: "Figure | str", budget: str) -> list[tuple[object, TrainConfig]]:

@@ -2,11 +2,11 @@
 the experience-sharing baselines SEAC and SePS.
 
 Each iteration collects a vectorised rollout with every seat's policy (``rollout.collect``)
-and hands it to the run's learner: for the PPO / TRPO family (``update.Learner``) the joint
+and hands it to the run's learner (``learner.Learner``): for the PPO / TRPO family the joint
 advantage from one centralised critic and GAE, the policy distances K and the reuse matrix M
 (Eq. 9), the learners updated one after another in a random order, each on the M-weighted
 experience of its sources (Eq. 8, or Eq. 7's trust-region step) with the sequential factor,
-then the critic; for SEAC / SePS their A2C step (``a2c.Learner``). Then the loop evaluates and
+then the critic; for SEAC / SePS their A2C step. Then the loop evaluates and
 checkpoints. ``train(cfg, out_dir)`` returns the evaluation rows as a DataFrame and keeps
 ``results.csv`` and ``checkpoint.pt`` in ``out_dir``; the per-iteration history lives in the
 checkpoint (``runstate.load_history``).
@@ -23,11 +23,11 @@ import numpy as np
 import pandas as pd
 import torch
 
-from oapo_lite.board import Board
-from oapo_lite.config import TrainConfig
-from oapo_lite.losses import Diverged
-from oapo_lite.rollout import collect, episode_scores
-from oapo_lite.runstate import RunState, derive_seed, git_revision, load_checkpoint, save_results
+from oapo_lite.neural.board import Board
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import Diverged
+from oapo_lite.neural.rollout import collect, episode_scores
+from oapo_lite.neural.runstate import RunState, derive_seed, git_revision, load_checkpoint, save_results
 from oapo_lite.store import Lock
 
 

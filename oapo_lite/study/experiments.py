@@ -20,14 +20,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from oapo_lite.config import TrainConfig
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
-from oapo_lite import grid
-from oapo_lite.grid import COMMITTED, FIGURES, SHARED_RUNS, Run, figure_runs, runs_of
+from oapo_lite.neural.config import TrainConfig
 from oapo_lite.store import DamagedFile, read_arrays, write_frame
+from oapo_lite.study import grid
+from oapo_lite.study.grid import COMMITTED, FIGURES, Run, SHARED_RUNS, figure_runs, runs_of
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def figures_dir(budget: str) -> Path:
@@ -193,7 +193,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     ``progress``: True (a bar), "lines" (one line per run, for logs) or False."""
     from tqdm import tqdm
 
-    from oapo_lite import executors
+    from oapo_lite.study import executors
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
@@ -274,7 +274,7 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
 def seat_networks(figure: str, budget: str) -> dict[tuple[str, object], list[int]]:
     """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``), from
     each env's seat kinds (``registry.agent_types``)."""
-    from oapo_lite.nets import owners
+    from oapo_lite.neural.nets import owners
 
     kinds, out = {}, {}
     for label, cfg in figure_runs(figure, budget):

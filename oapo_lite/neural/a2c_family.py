@@ -24,14 +24,33 @@ import numpy as np
 import torch
 from torch import nn
 
-from oapo_lite import reuse, seps
-from oapo_lite.adam import Adam
-from oapo_lite.losses import check_finite, explained_variance, source_mean, update_diagnostics
-from oapo_lite.nets import Actors, Critic
+from oapo_lite import reuse
+from oapo_lite.neural import seps
+from oapo_lite.neural.adam import Adam
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import check_finite, explained_variance, source_mean, update_diagnostics
+from oapo_lite.neural.nets import Actors, Critic
 
 log = logging.getLogger(__name__)
 
 VALUE_COEF = 0.5
+# SEAC / SePS (5-step rollouts) run 16 env copies beside a PPO-family run: 80 env steps an
+# update, 20 updates per PPO iteration of 32 x 50 steps
+A2C_ENVS = 16
+
+
+def beside_ppo(kw: dict) -> dict:
+    """The settings ``kw`` of a PPO-family run (``steps``, ``eval_every``, its batch shape)
+    turned into a SEAC / SePS run's: ``A2C_ENVS`` copies, and evaluations and checkpoints spaced
+    as many A2C updates apart as fit one PPO iteration, so every curve of a figure is evaluated
+    at the same env steps; SePS pre-trains for the first tenth of the steps (at least one update)."""
+    batch = kw.get("n_envs", TrainConfig.n_envs) * kw.get("rollout_len", TrainConfig.rollout_len)
+    ratio = max(1, batch // (A2C_ENVS * TrainConfig.n_step))
+    out = dict(kw, n_envs=A2C_ENVS, eval_every=kw.get("eval_every", TrainConfig.eval_every) * ratio,
+               checkpoint_every=kw.get("checkpoint_every", TrainConfig.checkpoint_every) * ratio)
+    if kw["algo"] == "seps":
+        out["seps_pretrain_steps"] = max(kw["steps"] // 10, A2C_ENVS * TrainConfig.n_step)
+    return out
 
 
 def nstep_returns(reward: torch.Tensor, done: torch.Tensor, last_value: torch.Tensor, gamma: float) -> torch.Tensor:
@@ -90,7 +109,7 @@ class A2C:
     def params(self, net: int) -> list[nn.Parameter]:
         return self.actors.net_params(net) + list(self.critics[net].parameters())
 
-    def values(self, obs: torch.Tensor, nets) -> torch.Tensor:
+    def critic_values(self, obs: torch.Tensor, nets) -> torch.Tensor:
         """(len(nets), M): V_c(obs) for every net c in ``nets``; ``obs`` (M, obs_dim)."""
         return torch.stack([self.critics[c](obs) for c in nets])
 
@@ -113,7 +132,7 @@ class A2C:
         # every used net on every distinct input in one batched forward, gathered per seat
         k, U = len(nets), inputs.obs.shape[0]
         d = self.actors(inputs.obs.expand(k, U, -1), nets, inputs.avail.expand(k, U, -1))[:, inputs.index]
-        v = self.values(inputs.obs, nets)[:, inputs.index]
+        v = self.critic_values(inputs.obs, nets)[:, inputs.index]
         total, parts = 0.0, []
         for row, net in enumerate(nets):
             own = torch.tensor([c == net for c in owner])
@@ -166,10 +185,10 @@ class A2C:
             opt.load_state_dict(s)
 
 
-class Learner:
-    """What the training loop drives for ``seac`` and ``seps``: the A2C step of every iteration
-    and, for SePS, the pre-training phase on one shared network followed by the switch to one
-    network per cluster. ``owner`` (seat -> network) is what collect() and evaluate() use."""
+class A2CFamilyLearner:
+    """``learner.Learner`` for ``seac`` and ``seps``: the A2C step of every iteration and, for
+    SePS, the pre-training phase on one shared network followed by the switch to one network per
+    cluster. ``owner`` (seat -> network) is what the rollouts and evaluations act with."""
 
     def __init__(self, cfg, env, actors: Actors, gen: torch.Generator):
         n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
@@ -232,12 +251,10 @@ class Learner:
                  {k: round(v, 4) for k, v in self.db_scores.items()})
 
     def state_dict(self) -> dict:
-        """This learner's part of the run's checkpoint, under one key."""
-        return {"a2c": {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
-                        "embeddings": self.embeddings, "db_scores": self.db_scores}}
+        return {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
+                "embeddings": self.embeddings, "db_scores": self.db_scores}
 
-    def load_state_dict(self, checkpoint: dict) -> None:
-        state = checkpoint["a2c"]
+    def load_state_dict(self, state: dict) -> None:
         self.a2c.load_state_dict(state["a2c"])
         self.owner, self.buffer = state["owner"], state["buffer"]
         self.embeddings, self.db_scores = state["embeddings"], state["db_scores"]

@@ -13,12 +13,11 @@ import numpy as np
 import pandas as pd
 import torch
 
-from oapo_lite.a2c import Learner as A2CLearner
-from oapo_lite.config import ALGOS, TrainConfig
-from oapo_lite.nets import Actors, owners
-from oapo_lite.rollout import make_env
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.learner import Learner, make_learner
+from oapo_lite.neural.nets import Actors, owners
+from oapo_lite.neural.rollout import make_env
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
-from oapo_lite.update import Learner
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
 
@@ -46,14 +45,14 @@ def git_revision() -> str:
 @dataclass
 class RunState:
     """Everything a run carries from one iteration to the next. ``start`` builds it from a config
-    (always in the same order: a run is reproducible from its seed); ``learner`` is the PPO / TRPO
-    family's (``update.Learner``) or SEAC / SePS's (``a2c.Learner``)."""
+    (always in the same order: a run is reproducible from its seed); ``learner`` is its
+    algorithm family's (``learner.Learner``)."""
 
     cfg: TrainConfig
     env: object
     eval_env: object
     actors: Actors
-    learner: Learner | A2CLearner
+    learner: Learner
     act_gen: torch.Generator  # the actions of the rollouts
     step: object  # the envs' last step: where the next rollout starts
     iteration: int = 0
@@ -68,7 +67,7 @@ class RunState:
         init_gen = torch.Generator().manual_seed(cfg.seed)
         actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,
                         env.continuous, init_gen, cfg.feature_norm)
-        learner = (A2CLearner if ALGOS[cfg.algo].a2c else Learner)(cfg, env, actors, init_gen)
+        learner = make_learner(cfg, env, actors, init_gen)
         act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))
         return cls(cfg, env, eval_env, actors, learner, act_gen, env.reset())
 
@@ -79,7 +78,7 @@ class RunState:
 
     def state_dict(self) -> dict:
         return {"config": self.cfg.flat(), "iteration": self.iteration, "actors": self.actors.state_dict(),
-                **self.learner.state_dict(), "act_gen": self.act_gen.get_state(), "torch_rng": torch.get_rng_state(),
+                "learner": self.learner.state_dict(), "act_gen": self.act_gen.get_state(), "torch_rng": torch.get_rng_state(),
                 "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows}
 
     def load_state_dict(self, ck: dict) -> None:
@@ -89,7 +88,7 @@ class RunState:
         check_resumable(self.cfg, ck)
         try:
             self.actors.load_state_dict(ck["actors"])
-            self.learner.load_state_dict(ck)
+            self.learner.load_state_dict(ck["learner"])
             self.act_gen.set_state(ck["act_gen"])
             torch.set_rng_state(ck["torch_rng"])
             self.env.set_state(ck["env"])
@@ -118,6 +117,11 @@ def load_checkpoint(out_dir: str | Path) -> dict:
         ck = torch.load(path, weights_only=False)
     except (FileNotFoundError, PermissionError):  # absent or unreadable, not damaged: starting afresh would lose it
         raise
+    except (ModuleNotFoundError, AttributeError) as err:  # pickled objects of a module since moved or renamed
+        if "oapo_lite" not in str(err):
+            raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}); "
+                              f"{START_AFRESH}") from None
+        raise ValueError(f"checkpoint {path} was written by an older oapo_lite ({err}); {START_AFRESH}") from None
     except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
         detail = str(err).split(". ")[0][:120] or "no detail"
         raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {detail}); "

@@ -20,11 +20,11 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from oapo_lite.cli import resource_error
+from oapo_lite.neural.runstate import git_revision
+from oapo_lite.neural.train import train
 from oapo_lite.store import DamagedFile
-from oapo_lite.runstate import git_revision
-from oapo_lite.train import train
 
-PACKAGE = Path(__file__).resolve().parent
+PACKAGE = Path(__file__).resolve().parents[1]
 
 
 def train_job(cfg, checkpoints: str):

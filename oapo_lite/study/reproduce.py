@@ -12,9 +12,10 @@ import sys
 import time
 from pathlib import Path
 
-from oapo_lite import cli, grid
+from oapo_lite import cli
+from oapo_lite.study import grid
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = ROOT / "notebooks"
 
 
@@ -126,7 +127,7 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from oapo_lite.executors import pool_worker, stop
+    from oapo_lite.study.executors import pool_worker, stop
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -170,7 +171,7 @@ def _interrupt(signum, frame):
 
 
 def main(argv: list[str] | None = None) -> int:
-    from oapo_lite import experiments
+    from oapo_lite.study import experiments
 
     parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
     parser.add_argument("--budget", default="smoke", help=f"one of {sorted(grid.BUDGETS)}")
@@ -198,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.address is not None and args.executor != "ray":
             raise ValueError(f"--address {args.address!r} needs --executor ray")
         if args.executor == "ray":
-            from oapo_lite.executors import check_address
+            from oapo_lite.study.executors import check_address
 
             check_address(args.address)
         _check_writable(experiments.data_dir(args.budget))

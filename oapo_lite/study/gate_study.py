@@ -4,7 +4,7 @@ gate compare with sigma?
 HAPPO (no reuse, so its policies drift apart as they would without the gate's pull) is trained
 on SMAX 3m, 2s3z, 6h_vs_8z and HalfCheetah 2x3 at the configs of Fig. 4's and the early-reuse
 figure's ``cpu`` budgets; at every iteration the same per-observation KLs
-(``update.pairwise_distances``) are reduced by each statistic of ``reuse.KL_REDUCES``. One CSV
+(``ppo_family.pairwise_distances``) are reduced by each statistic of ``reuse.KL_REDUCES``. One CSV
 per run goes to ``figures/data/gate_statistic/``, its config and git revision in a JSON beside
 it (``benchmarks/gate_statistic.py`` trains what is missing). ``summary`` gives, per env,
 statistic and sigma:
@@ -33,13 +33,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from oapo_lite import experiments, grid, reuse
-from oapo_lite.config import TrainConfig
-from oapo_lite.rollout import make_env
-from oapo_lite.runstate import git_revision
+from oapo_lite import reuse
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.ppo_family import PPOFamilyLearner, pairwise_distances
+from oapo_lite.neural.rollout import make_env
+from oapo_lite.neural.runstate import git_revision
+from oapo_lite.neural.train import train
 from oapo_lite.store import atomic_write, write_frame
-from oapo_lite.train import train
-from oapo_lite.update import Learner, pairwise_distances
+from oapo_lite.study import experiments, grid
 
 DATA = experiments.data_dir("cpu") / "gate_statistic"
 ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", grid.HALFCHEETAH)
@@ -59,7 +60,7 @@ def happo_config(env: str, seed: int) -> TrainConfig:
 def measure(cfg: TrainConfig) -> pd.DataFrame:
     """Train ``cfg`` and return K under every statistic at every iteration, one row per
     (iteration, learner, peer)."""
-    rows, learn, types = [], Learner.learn, make_env(cfg, 1, seed=0).agent_types
+    rows, learn, types = [], PPOFamilyLearner.learn, make_env(cfg, 1, seed=0).agent_types
 
     def recording(self, batch, step, it):
         kl = pairwise_distances(self.actors, batch.inputs, self.owner)
@@ -70,12 +71,12 @@ def measure(cfg: TrainConfig) -> pd.DataFrame:
                          "same_kind": types[i] == types[j], **{s: K[s][i, j] for s in K}})
         return learn(self, batch, step, it)
 
-    Learner.learn = recording
+    PPOFamilyLearner.learn = recording
     try:
         with tempfile.TemporaryDirectory() as tmp:
             train(cfg, tmp, resume=False, progress=False)
     finally:
-        Learner.learn = learn
+        PPOFamilyLearner.learn = learn
     return pd.DataFrame(rows).assign(env=cfg.env, seed=cfg.seed)
 
 

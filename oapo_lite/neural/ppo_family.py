@@ -1,8 +1,9 @@
 """The PPO / TRPO family's update of one iteration (Algorithm 1 lines 4-9, then the critic):
 the joint advantage, the policy distances K and Eq. 9's reuse weights, the learners updated one
 after another on their sources' samples (Eq. 8, or Eq. 7's trust-region step) with the
-sequential factor, and the centralised critic. ``Learner`` holds what only this family needs
-(critic, value normaliser, optimisers, the update-order generator) and is what the loop drives."""
+sequential factor, and the centralised critic. ``PPOFamilyLearner`` holds what only this family
+needs (critic, value normaliser, optimisers, the update-order generator): the family's side of
+``learner.Learner``."""
 from __future__ import annotations
 
 import math
@@ -11,18 +12,20 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from oapo_lite import adaptive, reuse
-from oapo_lite.adam import Adam
-from oapo_lite.config import ALGOS, AlgoSpec, TrainConfig
-from oapo_lite.losses import (Diverged, check_finite, explained_variance, gae, normalise, off_agent_objective,
+from oapo_lite import reuse
+from oapo_lite.algorithms import ALGOS, AlgoSpec
+from oapo_lite.neural import adaptive
+from oapo_lite.neural.adam import Adam
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.losses import (Diverged, check_finite, explained_variance, gae, normalise, off_agent_objective,
                               source_mean, update_diagnostics, update_factor, value_loss, weighted_kl)
-from oapo_lite.nets import Actors, Critic, ValueNorm, owners
-from oapo_lite.rollout import Inputs, Rollout, States, mean_or_nan
-from oapo_lite.trpo import trpo_step
+from oapo_lite.neural.nets import Actors, Critic, ValueNorm, owners
+from oapo_lite.neural.rollout import Inputs, Rollout, States, mean_or_nan
+from oapo_lite.neural.trpo import trpo_step
 
 
 @dataclass
-class Sources:
+class LearnerBatch:
     """What one update of a net trains on: the seats ``rows`` — its sources with W > 0 and the
     seats it learns for (``own``, positions in ``rows``, for the entropy and the factor)."""
 
@@ -39,7 +42,7 @@ class Sources:
     distinct: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @classmethod
-    def of(cls, net: int, weights: np.ndarray, own: list[int], batch: Rollout) -> "Sources":
+    def of(cls, net: int, weights: np.ndarray, own: list[int], batch: Rollout) -> "LearnerBatch":
         """Net ``net`` learning for the seats ``own`` from every seat's samples, weighted by
         ``weights`` (n,)."""
         rows = sorted(set(np.flatnonzero(weights > 0).tolist()) | set(own))
@@ -56,7 +59,7 @@ class Sources:
                    torch.unique(batch.inputs.index[rows], return_inverse=True))
 
 
-def learner_dists(actors: Actors, inputs: Inputs, src: Sources, idx=slice(None)) -> torch.Tensor:
+def learner_dists(actors: Actors, inputs: Inputs, src: LearnerBatch, idx=slice(None)) -> torch.Tensor:
     """(R, b, P): the learner's distribution on its sources' samples ``idx``, one forward
     over the distinct inputs they use."""
     if src.distinct is not None and idx == slice(None):
@@ -83,7 +86,7 @@ def descend(opt: torch.optim.Optimizer, params: list[torch.Tensor], loss: torch.
     opt.step()
 
 
-def ppo_loss(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor, adv: torch.Tensor,
+def ppo_loss(actors: Actors, inputs: Inputs, src: LearnerBatch, factor: torch.Tensor, adv: torch.Tensor,
              cfg: TrainConfig, idx=slice(None)) -> tuple[torch.Tensor, torch.Tensor]:
     """Eq. 8's loss of one learner on its sources' samples ``idx``: minus the clipped off-agent
     surrogate and the entropy bonus of its own seats. Returns (loss, surrogate)."""
@@ -98,7 +101,7 @@ def ppo_loss(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor,
     return -(obj + cfg.entropy_coef * entropy), obj
 
 
-def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: Sources, factor: torch.Tensor,
+def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: LearnerBatch, factor: torch.Tensor,
                adv: torch.Tensor, cfg: TrainConfig, rng: np.random.Generator) -> float:
     """OAPPO (Eq. 8): epochs of Adam on ``ppo_loss``. Returns the last surrogate value."""
     params = actors.net_params(src.net)
@@ -110,7 +113,7 @@ def ppo_update(actors: Actors, opt: torch.optim.Optimizer, inputs: Inputs, src: 
     return obj.item()
 
 
-def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tensor, adv: torch.Tensor,
+def trpo_update(actors: Actors, inputs: Inputs, src: LearnerBatch, factor: torch.Tensor, adv: torch.Tensor,
                 cfg: TrainConfig) -> tuple[float, float]:
     """OATRPO (Eq. 7): one trust-region step on the unclipped off-agent surrogate under the
     weighted KL(pi_old || pi) on the sources' observations (weights ``src.kl_w``).
@@ -134,7 +137,7 @@ def trpo_update(actors: Actors, inputs: Inputs, src: Sources, factor: torch.Tens
         return objective().item(), accepted
 
 
-def values(critic: Critic, rows: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+def critic_values(critic: Critic, rows: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """V(rows[index]). Where most samples repeat a state (the mazes: every copy starts alike, and
     a policy that has learned walks one path), from one forward of the distinct states, which
     V's gradient then costs too; else the samples' rows as they come (the engines' batches,
@@ -150,7 +153,7 @@ def advantages(critic: Critic, value_norm: ValueNorm, batch: Rollout, cfg: Train
     predictions (B,) for the clipped value loss)."""
     cut = batch.terminated | batch.truncated
     with torch.no_grad():
-        v_norm = values(critic, batch.states.rows, batch.states.index.reshape(-1)).reshape(batch.states.index.shape)
+        v_norm = critic_values(critic, batch.states.rows, batch.states.index.reshape(-1)).reshape(batch.states.index.shape)
         value = value_norm.denormalize(v_norm)
         next_value = torch.where(cut, 0.0, value[1:])
         if bootstrap:  # only then is V(final state) read: a critic forward the mazes do without
@@ -183,7 +186,7 @@ def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarr
     """(n, n, folds, P): row i, column j is the gradient, in learner i's parameters as they are
     now, of its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on
     source j's samples alone, with the factor rho = 1 (nobody has moved yet); with ``folds`` > 1,
-    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. Sources
+    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. LearnerBatch
     that M[i] gives no weight get zeros (the adaptive rule only rescales what Eq. 9 allows).
     Separate nets only."""
     n, n_envs = M.shape[0], batch.reward.shape[1]
@@ -192,10 +195,10 @@ def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarr
     size = sum(p.numel() for p in actors.net_params(0))
     grads = np.zeros((n, n, folds, size))
     ones = torch.ones(1)
-    # sample b is step b // n_envs of env copy b % n_envs (``_per_agent``)
+    # sample b is step b // n_envs of env copy b % n_envs (``Rollout``)
     fold_of = torch.arange(adv.shape[0]) % n_envs % folds
     for i in range(n):
-        src = Sources.of(i, M[i], [i], batch)
+        src = LearnerBatch.of(i, M[i], [i], batch)
         params = actors.net_params(i)
         logp = actors.head.log_prob(learner_dists(actors, inputs, src), src.act)
         for r, j in enumerate(src.rows):
@@ -238,7 +241,7 @@ def update_actors(actors: Actors, opts: list, batch: Rollout, units: list, order
     factor = torch.ones(adv.shape[0])
     objectives, trpo_kls, learners = [], [], []
     for u in order:
-        src = Sources.of(*units[u], batch)
+        src = LearnerBatch.of(*units[u], batch)
         if spec.trust_region:
             objective, accepted_kl = trpo_update(actors, batch.inputs, src, factor, adv, cfg)
             trpo_kls.append(accepted_kl)
@@ -267,18 +270,17 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
     target, index = value_norm.normalize(returns), states.index[:-1].reshape(-1)
     for _ in range(cfg.ppo_epochs):
         for idx in _minibatches(returns.shape[0], cfg.n_minibatch, rng):
-            loss = value_loss(values(critic, states.rows, index[idx]), v_old[idx], target[idx], cfg.clip)
+            loss = value_loss(critic_values(critic, states.rows, index[idx]), v_old[idx], target[idx], cfg.clip)
             check_finite(loss, "the value loss", "critic")
             descend(opt, list(critic.parameters()), loss, cfg.max_grad_norm)
     return loss.item()
 
 
 
-class Learner:
-    """What the loop drives for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO: ``learn`` is one
+class PPOFamilyLearner:
+    """``learner.Learner`` for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO: ``learn`` is one
     iteration's update (Algorithm 1 lines 4-9, then the critic); ``owner[k]`` is the net of seat k.
-    Built right after the actors from the same generator (the critic's initialisation follows
-    theirs), so that a run is reproducible from its seed."""
+    The critic's initialisation follows the actors' in the generator."""
 
     def __init__(self, cfg: TrainConfig, env, actors: Actors, gen: torch.Generator):
         self.cfg, self.spec, self.actors = cfg, ALGOS[cfg.algo], actors
@@ -304,14 +306,17 @@ class Learner:
         self.rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
 
     def learn(self, batch: Rollout, step, it: int) -> tuple[dict, dict]:
-        """Iteration ``it``'s update on ``batch``: (metrics for the results rows, per-iteration
-        detail for the history: the KL of every accepted trust-region step)."""
+        """Iteration ``it``'s update on ``batch`` (``step`` is not read: the critic bootstraps from
+        the batch's final states): (metrics for the results rows, per-iteration detail for the
+        history: the KL of every accepted trust-region step)."""
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
+        # Algorithm 1 line 4: the joint advantage (the loop's rollout was line 3)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
         # K feeds Eq. 9 only for OAPO; for the others it is a logged column, which the results
         # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
         K = (policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
              if spec.reuse == "oapo" or cfg.evaluates(it + 1) else np.full((n, n), np.nan))
+        # line 5: omega, the distribution of reuse sequences, as the matrix M of Eq. 9
         M = (np.eye(n) if it < cfg.reuse_warmup  # the control: no reuse while untrained nets look alike
              else reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.reuse_lambda, self.allowed))
         if cfg.reuse_adapt is not None:
@@ -321,6 +326,7 @@ class Learner:
             M = adaptive.agreement_matrix(M, C, cfg.reuse_adapt)
         W = M if cfg.reuse_mode == "weights" else np.eye(n)[reuse.sample_mapping(M, self.rng)]
         units = update_units(W, self.owner, cfg.update_by)
+        # line 6: the update sequence; lines 7-9: every learner in turn (Eq. 8, or Eq. 7's step)
         order = reuse.update_order(len(units), self.rng) if spec.sequential else range(len(units))
         _, objectives, trpo_kls, learners = update_actors(actors, self.actor_opts, batch, units, order, adv, spec, cfg,
                                                           self.rng)

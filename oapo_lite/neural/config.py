@@ -1,4 +1,4 @@
-"""A run's configuration: the algorithm table and ``TrainConfig``, checked when it is made."""
+"""A run's configuration: ``TrainConfig``, checked when it is made, and which algorithms read each field."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,35 +10,14 @@ from typing import Callable
 
 import numpy as np
 
-from oapo_lite import adaptive
-from oapo_lite.reuse import KL_REDUCES, SCHEMES
+from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.oracle import check_fits
+from oapo_lite.neural import adaptive
+from oapo_lite.reuse import KL_REDUCES, SCHEMES
 
 
 NETWORKS = ("agent", "type", "one")  # one network per seat, per kind of seat, for every seat
-
-
-@dataclass(frozen=True)
-class AlgoSpec:
-    reuse: str | None  # "oapo": Eq. 9; "own": M = I; "uniform": M = 1/n; None: the A2C learner's own rule
-    sequential: bool  # random update order and the factor rho
-    trust_region: bool  # Eq. 7 (TRPO step) instead of Eq. 8 (PPO clip)
-    shared: bool  # one network for every seat
-    a2c: bool = False  # SEAC / SePS: their A2C learner (oapo_lite/a2c.py) replaces the update below
-
-
-ALGOS = {
-    "oappo": AlgoSpec("oapo", True, False, False),
-    "oatrpo": AlgoSpec("oapo", True, True, False),
-    "happo": AlgoSpec("own", True, False, False),
-    "hatrpo": AlgoSpec("own", True, True, False),
-    "mappo": AlgoSpec("uniform", False, False, True),
-    "ippo": AlgoSpec("own", False, False, False),
-    # their own learner (a2c.py) decides who learns from whom
-    "seac": AlgoSpec(None, False, False, False, a2c=True),
-    "seps": AlgoSpec(None, False, False, False, a2c=True),
-}
 
 
 # The fields only some algorithms read; every other field applies to every run. A run refuses a

@@ -24,8 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from oapo_lite.envs.core import STEP_COST
-from oapo_lite.envs.maps import Maze, reachable
+from oapo_lite.envs.maps import STEP_COST, Maze, reachable
 from oapo_lite.reuse import categorical_kl
 
 MAX_DENSE_ENTRIES = 50_000_000  # S * A_joint * S floats held in P (400 MB)

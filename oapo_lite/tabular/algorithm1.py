@@ -15,7 +15,7 @@ of the already-updated learners' own-seat ratios. HAPPO / HATRPO are the identit
 MAPPO is one shared table trained on every seat with M = 1/n and no factor.
 
 Every iteration also records the true improvement J(pi_{k+1}) - J(pi_k) and Lemma 1's
-lower bound in its valid form (see oapo_lite.exact.lemma1 and tests/test_exact.py).
+lower bound in its valid form (see oapo_lite.tabular.exact.lemma1 and tests/test_exact.py).
 """
 from __future__ import annotations
 
@@ -24,12 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oapo_lite import config, reuse
-from oapo_lite.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, log_softmax, softmax, state_distribution
+from oapo_lite import reuse
+from oapo_lite.algorithms import ALGOS
+from oapo_lite.tabular.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, log_softmax, softmax, state_distribution
 
-# the algorithms of the tabular track: the neural track's PPO / TRPO family (``config.ALGOS``,
+# the algorithms of the tabular track: the PPO / TRPO family of the algorithm table (``ALGOS``,
 # which says each one's reuse matrix and update) but IPPO
-ALGOS = ("oappo", "oatrpo", "happo", "hatrpo", "mappo")
+TABLE_ALGOS = ("oappo", "oatrpo", "happo", "hatrpo", "mappo")
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,7 @@ class TabularConfig:
     seed: int = 0
 
     def __post_init__(self):
-        for name, value, allowed in (("algo", self.algo, ALGOS), ("reuse", self.reuse, ("weights", "sample")),
+        for name, value, allowed in (("algo", self.algo, TABLE_ALGOS), ("reuse", self.reuse, ("weights", "sample")),
                                      ("estimate", self.estimate, ("exact", "samples"))):
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
@@ -243,7 +244,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
     rng_init, rng_order, rng_map, rng_samples = (np.random.default_rng(s) for s in streams)
     logits = rng_init.normal(0.0, cfg.init_scale, (1 if shared else n, game.n_obs, game.n_actions))
     seat_learner = np.zeros(n, dtype=np.int64) if shared else np.arange(n)
-    update = trpo_update if config.ALGOS[cfg.algo].trust_region else ppo_update
+    update = trpo_update if ALGOS[cfg.algo].trust_region else ppo_update
     records = []
     for k in range(cfg.iterations):
         old = softmax(logits)[seat_learner]
@@ -254,7 +255,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
         std = np.sqrt(batch.weight @ (batch.adv - mean) ** 2 / batch.weight.sum())
         adv = (batch.adv - mean) / (std + 1e-8)
         kl = kl_between_agents(old, eta)
-        m = reuse.matrix_for(config.ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.reuse_lambda)
+        m = reuse.matrix_for(ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.reuse_lambda)
         mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse == "sample" else None
         rows = np.eye(n)[mapping] if mapping is not None else m
         order = np.zeros(1, dtype=np.int64) if shared else reuse.update_order(n, rng_order)

@@ -9,34 +9,9 @@ Two numbers summarise a run: the env steps it took to first reach ``threshold`` 
 optimum (censored at its last step if it never did), and its final fraction of the optimum
 (mean over the last ``tail`` share of its evaluation points: a tenth, a fifth for returns).
 
-Interval estimates, as in rliable (Agarwal et al., NeurIPS 2021): the interquartile mean
-(IQM, the mean of the middle 50% of runs) of each number over seeds, the probability of
-improvement P(a better than b) = P(X_a > X_b) + P(X_a = X_b) / 2 for one run drawn from
-each curve (the Mann-Whitney U statistic over n_a n_b), and 95% percentile bootstrap
-confidence intervals in which every curve's runs are resampled on their own (the stratified
-bootstrap with one stratum per curve). With one seed there is no interval (NaN).
-
-The decision rule (``RULE``, printed where the verdicts are introduced) reads, in order:
-
-1. *not testable at this budget* when the data cannot decide: fewer than two seeds of a
-   curve; a curve that did not learn (below); for "faster" and "as reliably", no seed of either
-   curve reaching the threshold;
-2. a pairwise claim "a beats b" is *reproduced* when the whole 95% interval of P(a better
-   than b) lies above 0.5, *contradicted* when it lies below 0.5, *direction only* when only
-   the point estimate is above 0.5, *not reproduced* otherwise; "a stays below the threshold"
-   (``stuck``) and "a reaches it" (``optimal``) read the interval of a's final IQM the same way;
-3. "faster" reads the steps to the threshold alone (a seed that never got there counts at the
-   budget, behind every seed that did); "as reliably" (``reliable``) reads the share of seeds
-   that got there, a's minus b's, against 0;
-4. (checked right after step 1) a claim that OAPPO or OATRPO beats another algorithm is
-   *not a test of reuse* when that curve hardly reused while it learned (``REUSE_PART``); the
-   status says so and when the gate last opened (the interval is kept as evidence).
-
-A curve *learned* at a budget when its runs' final level exceeds their initial level (the
-mean of the first evaluations, the untrained policy) by more than twice the standard error
-of that gain over seeds, and its final IQM is above the metric's floor (a 5% win rate or
-score; none for fractions of the optimum or returns): not one lucky evaluation, not one
-lucky seed.
+Interval estimates (IQM, probability of improvement, stratified bootstrap) come from
+``statistics``. The decision rule, with what "a curve learned" means, is ``RULE``, the one place
+it is written (printed where the verdicts are introduced); ``check`` applies it to one claim.
 """
 from __future__ import annotations
 
@@ -44,10 +19,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
-from oapo_lite.config import ALGOS
+from oapo_lite.algorithms import ALGOS
 from oapo_lite.reuse import peer_share
+from oapo_lite.study.statistics import Interval, bootstrap_interval, iqm, probability_of_improvement
 
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
@@ -60,9 +35,6 @@ REUSE_PART = 0.25
 EQ9_ALGOS = tuple(a for a, spec in ALGOS.items() if spec.reuse == "oapo")
 INITIAL = 0.1  # a run's initial level: its first tenth of evaluation points (the untrained policy at step 0)
 LEARN_SE = 2.0  # a curve learned when its gain exceeds this many standard errors over seeds
-CONFIDENCE = 0.95
-N_RESAMPLES = 10_000
-SEED = 0  # every bootstrap starts from this seed, so a verdict does not depend on call order
 # per-run numbers a verdict reads; "steps" and "drawdown" are better when lower
 RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawdown", "reached": "reached"}
 
@@ -234,59 +206,6 @@ def summary(df: pd.DataFrame, threshold: float | None = None, metric: Metric = F
 
 # --- interval estimates -------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class Interval:
-    """A point estimate and its bootstrap confidence interval (NaN bounds: no interval)."""
-
-    point: float
-    low: float
-    high: float
-
-    def fmt(self, spec: str = ".3f") -> str:
-        if np.isnan(self.low):
-            return f"{self.point:{spec}} [no interval: 1 seed]"
-        return f"{self.point:{spec}} [{self.low:{spec}}, {self.high:{spec}}]"
-
-
-def iqm(x, axis: int = -1):
-    """Interquartile mean: the mean after cutting 25% of the values at each end (rliable's IQM).
-
-    ``scipy.stats.trim_mean`` cuts ``int(0.25 n)`` values per side, so with 5 seeds it is the
-    mean of the middle three.
-    """
-    return stats.trim_mean(x, 0.25, axis=axis)
-
-
-def probability_of_improvement(x, y, axis: int = -1):
-    """P(X > Y) + P(X = Y) / 2 for X drawn from ``x`` and Y from ``y``: the Mann-Whitney U
-    statistic of x over y divided by n_x n_y (rliable's probability of improvement, one task)."""
-    x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)[..., :, None]
-    y = np.moveaxis(np.asarray(y, dtype=float), axis, -1)[..., None, :]
-    p = ((x > y) + 0.5 * (x == y)).mean(axis=(-2, -1))
-    # a NaN ranks nowhere: counted as a loss it would bias P towards 0, so P is NaN instead
-    p = np.where(np.isnan(x).any(axis=(-2, -1)) | np.isnan(y).any(axis=(-2, -1)), np.nan, p)
-    return float(p) if p.ndim == 0 else p
-
-
-def bootstrap_interval(statistic, *samples, confidence: float = CONFIDENCE,
-                       n_resamples: int = N_RESAMPLES, seed: int = SEED) -> Interval:
-    """``statistic(*samples)`` with its percentile bootstrap interval.
-
-    Each sample is one stratum, resampled with replacement on its own (a curve's runs are
-    never mixed with another curve's): rliable's stratified bootstrap with one task.
-    ``statistic`` must take an ``axis`` keyword (it is evaluated on all resamples at once).
-    """
-    if not 0 < confidence < 1:
-        raise ValueError(f"confidence must lie in (0, 1), got {confidence!r}")
-    samples = [np.asarray(s, dtype=float) for s in samples]
-    point = float(statistic(*samples, axis=-1))
-    if min(len(s) for s in samples) < 2:
-        return Interval(point, np.nan, np.nan)
-    ci = stats.bootstrap(samples, statistic, n_resamples=n_resamples, confidence_level=confidence,
-                         method="percentile", vectorized=True, rng=np.random.default_rng(seed)).confidence_interval
-    return Interval(point, float(ci.low), float(ci.high))
-
-
 def paired_difference(df: pd.DataFrame, a, b, y: str, tail: float = 0.2) -> tuple[pd.DataFrame, Interval]:
     """Curve ``a`` against curve ``b`` seed by seed: per seed both runs' final value (the mean of
     ``y`` over the last ``tail`` of their evaluation points) and a - b, with the mean difference
@@ -309,7 +228,7 @@ class Evidence:
         # each curve's algorithm (where the data names it): which curves reuse by Eq. 9
         self.algos = df.groupby("label", sort=False)["algo"].first().to_dict() if "algo" in df else {}
 
-    def values(self, label, stat: str) -> np.ndarray:
+    def run_values(self, label, stat: str) -> np.ndarray:
         """Per-seed values of the per-run statistic ``stat`` (a key of ``RUN_STATS``) for one curve."""
         if stat not in RUN_STATS:
             raise ValueError(f"unknown run statistic {stat!r}; choose from {sorted(RUN_STATS)}")
@@ -319,14 +238,14 @@ class Evidence:
 
     def level(self, label, stat: str) -> Interval:
         """IQM over seeds of ``stat`` with its 95% interval."""
-        return bootstrap_interval(iqm, self.values(label, stat))
+        return bootstrap_interval(iqm, self.run_values(label, stat))
 
     def improvement(self, a, b, stat: str) -> Interval:
         """P(a better than b) on ``stat`` with its 95% interval; fewer steps or a smaller
         drawdown is better."""
         sign = -1.0 if stat in ("steps", "drawdown") else 1.0
-        return bootstrap_interval(probability_of_improvement, sign * self.values(a, stat),
-                                  sign * self.values(b, stat))
+        return bootstrap_interval(probability_of_improvement, sign * self.run_values(a, stat),
+                                  sign * self.run_values(b, stat))
 
 
 def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric = FRAC_OPT) -> pd.DataFrame:
@@ -345,7 +264,7 @@ def intervals(df: pd.DataFrame, threshold: float | None = None, metric: Metric =
 
 # --- verdicts -------------------------------------------------------------------------------
 
-RULE = f"""How a verdict is decided (oapo_lite.verdicts), in this order:
+RULE = f"""How a verdict is decided (oapo_lite.study.verdicts), in this order:
 1. Not testable at this budget: a curve has fewer than 2 seeds, or did not learn (its final
    level is not above its initial level by more than {LEARN_SE:g} standard errors of the gain over
    seeds, or ends at or below the metric's floor: a 5% win rate or score), or, for "faster",
@@ -425,7 +344,7 @@ def reliable(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` reaches the threshold at least as often as ``b``: the share of ``a``'s seeds
     that reached it minus ``b``'s, with its 95% interval, read against 0 (a tie holds)."""
     s, reach = ev.summary, ev.metric.reach.format(ev.threshold)
-    d = bootstrap_interval(_share_difference, ev.values(a, "reached"), ev.values(b, "reached"))
+    d = bootstrap_interval(_share_difference, ev.run_values(a, "reached"), ev.run_values(b, "reached"))
     status = (REPRODUCED if d.low >= 0 else CONTRADICTED if d.high < 0 else DIRECTION if d.point >= 0 else NOT)
     estimate = f"share reached, {a} minus {b}: {d.fmt()}"
     return Verdict(claim, status, f"seeds that reached {reach}: {a} {s.loc[a, 'reached']}/{s.loc[a, 'seeds']} vs {b} "
@@ -558,24 +477,6 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
         return Verdict(claim, NOT_TESTABLE, "", "", why)
     verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
     return replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
-
-
-def claims(figure, df: pd.DataFrame) -> list[Verdict]:
-    """Check every claim the paper makes about ``figure`` (a ``grid.Figure`` or its id) against
-    that figure's data, measured by its metric (a claim the data cannot decide is
-    ``NOT_TESTABLE``, saying why)."""
-    from oapo_lite import grid  # the grid's entries hold the claims, written with this module's tests
-
-    fig = grid.get_figure(figure)
-    if not fig.claims:
-        raise ValueError(f"no claims recorded for figure {fig.id!r}; choose from "
-                         f"{sorted(f.id for f in grid.GRID if f.claims)}")
-    if fig.claims_per_env:  # claims per map or scenario, each judged on that env's runs
-        envs = df["env"].str.removeprefix(fig.claims_per_env) if len(df) else pd.Series(dtype=str)
-        evidence = {e: Evidence(df[envs == e], metric=fig.metric) for e in set(envs)}
-        return [check(evidence.get(e), test, labels, claim) for e, test, labels, claim in fig.claims]
-    ev = Evidence(df, metric=fig.metric) if len(df) else None
-    return [check(ev, test, labels, claim) for test, labels, claim in fig.claims]
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:

@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from oapo_lite import reuse
-from oapo_lite.config import NETWORKS
+from oapo_lite.neural.config import NETWORKS
 
 UNAVAILABLE_LOGIT = -1e10  # as in HARL: masked actions keep a finite logit, so 0 * logit stays 0
 

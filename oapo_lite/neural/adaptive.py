@@ -20,8 +20,8 @@ is used. c = 1 everywhere gives Eq. 9 under both; c <= 0 everywhere gives HAPPO'
 the sign rule is Eq. 9 with the disagreeing sources struck out.
 
 ``"gradient_test"`` strikes a source only on *evidence* of disagreement. One batch's cosine is
-noise while the KL gate is open (measured: centred at 0, positive 45% of the time), so the two
-rules above strike about half of the early reuse that makes Eq. 9 faster than HAPPO. Instead,
+noise while the KL gate is open (centred at 0: ASSUMPTIONS.md), so the two rules above strike
+about half of the early reuse that makes Eq. 9 faster than HAPPO. Instead,
 the batch's env copies are split into ``TEST_FOLDS`` folds; D_f = g_ii^(f) . mean_{h != f}
 g_ij^(h) estimates g_ii . g_ij without the noise the two share, and the source is struck when
 mean_f D_f < -TEST_Z * sd_f(D_f) / sqrt(TEST_FOLDS) (a one-sided t-test at z = 1); a(t) = 1

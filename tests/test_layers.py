@@ -1,0 +1,118 @@
+"""The package's layers, read from its imports: study -> neural / tabular -> shared parts, no
+module importing from a layer above its own (nor neural <-> tabular), and no import cycle."""
+import ast
+import shutil
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "oapo_lite"
+# a layer may import from the layers ranked below it; the shared parts are everything outside
+# the three folders (envs/, algorithms, reuse, store, cli); __main__ is the command line on top
+RANK = {"__main__": 3, "study": 2, "neural": 1, "tabular": 1, "shared": 0}
+
+
+def module_name(path: Path, root: Path) -> str:
+    parts = path.relative_to(root.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def layer(module: str) -> str:
+    part = module.split(".")[1] if "." in module else ""
+    return part if part in RANK else "shared"
+
+
+def imports(path: Path, root: Path, modules: set[str]) -> set[str]:
+    """The package's modules that ``path`` imports, at the top or inside a function. ``from
+    oapo_lite.study import grid`` is an import of the module ``oapo_lite.study.grid``."""
+    me, found = module_name(path, root), set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: from .maps import X
+                package = me.split(".")[:len(me.split(".")) - node.level + (path.name == "__init__.py")]
+                base = ".".join(package + ([node.module] if node.module else []))
+            else:
+                base = node.module
+            names = {f"{base}.{a.name}" for a in node.names}
+            found |= (names & modules) or {base}
+    return {m for m in found if m in modules} - {me}
+
+
+def graph(root: Path = PACKAGE) -> dict[str, set[str]]:
+    paths = {module_name(p, root): p for p in root.rglob("*.py")}
+    return {m: imports(p, root, set(paths)) for m, p in paths.items()}
+
+
+def violations(g: dict[str, set[str]]) -> list[str]:
+    """Every import of a module from a layer above its own, or beside it (neural <-> tabular)."""
+    return sorted(f"{m} ({layer(m)}) imports {d} ({layer(d)})" for m, deps in g.items() for d in deps
+                  if layer(d) != layer(m) and RANK[layer(d)] >= RANK[layer(m)])
+
+
+def cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    """Every strongly connected set of two or more modules (Tarjan's algorithm): a cycle of imports."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(g.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = [stack.pop()]
+            while group[-1] != v:
+                group.append(stack.pop())
+            on.difference_update(group)
+            if len(group) > 1:
+                out.append(sorted(group))
+
+    for v in sorted(g):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_every_module_imports_only_from_its_layer_or_below():
+    assert violations(graph()) == []
+
+
+def test_no_module_imports_itself_back_through_others():
+    assert cycles(graph()) == []
+
+
+def test_the_shared_parts_outside_the_layer_folders_are_few():
+    top = {m for m in graph() if layer(m) == "shared" and m.count(".") == 1}
+    assert top == {"oapo_lite.algorithms", "oapo_lite.cli", "oapo_lite.envs", "oapo_lite.reuse", "oapo_lite.store"}
+
+
+@pytest.mark.parametrize("where, line, words", [
+    ("neural/nets.py", "from oapo_lite.study import grid", "oapo_lite.neural.nets (neural) imports oapo_lite.study.grid (study)"),
+    ("reuse.py", "from oapo_lite.neural.config import TrainConfig",
+     "oapo_lite.reuse (shared) imports oapo_lite.neural.config (neural)"),
+    ("tabular/exact.py", "from oapo_lite.neural import nets",
+     "oapo_lite.tabular.exact (tabular) imports oapo_lite.neural.nets (neural)"),
+    ("envs/maps.py", "from .core import VecMaze", None),  # a cycle: core imports maps
+])
+def test_an_import_upwards_or_round_fails_the_check(tmp_path, where, line, words):
+    """The checks catch what they are for: a copy of the package with one import added."""
+    copy = tmp_path / "oapo_lite"
+    shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / where).write_text(f"{line}\n" + (copy / where).read_text())
+    g = graph(copy)
+    if words:
+        assert violations(g) == [words]
+    else:
+        assert ["oapo_lite.envs.core", "oapo_lite.envs.maps"] in [[m for m in c if m.endswith(("core", "maps"))]
+                                                                  for c in cycles(g)]
+
+
+def test_tarjan_finds_a_cycle_of_three_and_nothing_else():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
