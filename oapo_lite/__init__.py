@@ -2,6 +2,7 @@
 
 The package in layers; a layer imports only from the layers below it (``tests/test_layers.py``):
 
+    __main__   the command line (train, reproduce, book)
     study/     the reproduction: the grid of runs, the run cache and executors, statistics,
                the verdict rule, the claims, plots, the notebooks' runner and book
     neural/    the neural track: configs, networks, losses, rollouts, the two algorithm

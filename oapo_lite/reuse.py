@@ -9,8 +9,6 @@ import warnings
 
 import numpy as np
 
-from oapo_lite.envs.vec import HasSeatSpaces
-
 
 def _check_n(n: int) -> int:
     if int(n) != n or n < 1:
@@ -196,12 +194,12 @@ def allowed_mask(allowed, agents: tuple[str, ...]) -> np.ndarray | None:
     return allowed
 
 
-def check_spaces(env, pairs: np.ndarray) -> None:
+def check_spaces(agents, spaces, pairs: np.ndarray) -> None:
     """Reusing experience needs equal observation and action spaces (Section 4). ``pairs[i, j]``:
-    learner i may train on agent j's experience (not necessarily symmetric)."""
-    spaces = env.spaces if isinstance(env, HasSeatSpaces) else None
+    learner i may train on agent j's experience (not necessarily symmetric); ``spaces`` per seat,
+    or None where every seat's are equal by construction (``envs.vec.seat_spaces``)."""
     for i, j in zip(*np.nonzero(pairs)):
         if spaces is not None and i != j and spaces[i] != spaces[j]:
             raise ValueError(
-                f"reuse between agents {env.agents[i]!r} and {env.agents[j]!r} needs equal spaces, got "
+                f"reuse between agents {agents[i]!r} and {agents[j]!r} needs equal spaces, got "
                 f"{spaces[i]} and {spaces[j]}; forbid the pair with `allowed` or use happo/hatrpo/ippo")

@@ -23,11 +23,14 @@ def layer(module: str) -> str:
 
 
 def imports(path: Path, root: Path, modules: set[str]) -> set[str]:
-    """The package's modules that ``path`` imports, at the top or inside a function. ``from
-    oapo_lite.study import grid`` is an import of the module ``oapo_lite.study.grid``."""
+    """The package's modules that ``path`` imports: at the top or inside a function, by a string
+    naming the module (an engine table's), and the ``__init__`` of every package on the way
+    that is not one of its own. ``from oapo_lite.study import grid`` imports ``oapo_lite.study.grid``."""
     me, found = module_name(path, root), set()
     for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in modules:
+            found.add(node.value)
+        elif isinstance(node, ast.Import):
             found |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):
             if node.level:  # relative: from .maps import X
@@ -37,7 +40,9 @@ def imports(path: Path, root: Path, modules: set[str]) -> set[str]:
                 base = node.module
             names = {f"{base}.{a.name}" for a in node.names}
             found |= (names & modules) or {base}
-    return {m for m in found if m in modules} - {me}
+    own = {".".join(me.split(".")[:k]) for k in range(1, me.count(".") + 1)}  # being imported already
+    packages = {".".join(m.split(".")[:k]) for m in found for k in range(1, m.count(".") + 1)}
+    return {m for m in found | packages if m in modules} - own - {me}
 
 
 def graph(root: Path = PACKAGE) -> dict[str, set[str]]:
@@ -107,7 +112,7 @@ def test_an_import_upwards_or_round_fails_the_check(tmp_path, where, line, words
     (copy / where).write_text(f"{line}\n" + (copy / where).read_text())
     g = graph(copy)
     if words:
-        assert violations(g) == [words]
+        assert words in violations(g)
     else:
         assert ["oapo_lite.envs.core", "oapo_lite.envs.maps"] in [[m for m in c if m.endswith(("core", "maps"))]
                                                                   for c in cycles(g)]

@@ -2,6 +2,7 @@
 import copy
 import dataclasses
 import math
+import shutil
 import sys
 import types
 
@@ -16,7 +17,9 @@ from oapo_lite import __main__ as cli, reuse
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import MAPS, MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
+from oapo_lite.envs.vec import seat_spaces
 from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural import seps
 from oapo_lite.neural.nets import Actors, Categorical
 from oapo_lite.neural.ppo_family import LearnerBatch, learner_dists, policy_distances, update_actors, update_units
 from oapo_lite.neural.rollout import Inputs, Rollout, collect
@@ -137,8 +140,7 @@ def test_resuming_with_more_steps_gives_the_rows_of_the_longer_run(tmp_path):
     (lambda ck: ck["config"].pop("kl_reduce"), "no config fields ['kl_reduce']"),
     (lambda ck: ck["learner"].pop("critic_opt"), "no entry 'critic_opt'"),
     (lambda ck: delattr(ck["step"], "active"), "environment step has no fields ['active']"),
-    # the layout before the learner's state had one key: the PPO family's keys at the top level
-    (lambda ck: ck.update(ck.pop("learner")), "no entry 'learner'"),
+    (lambda ck: ck["learner"].pop("np_rng"), "no entry 'np_rng'"),
 ])
 def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, damage, words):
     cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
@@ -151,20 +153,56 @@ def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, d
     assert words in str(err.value) and "resume=False" in str(err.value)
 
 
-def test_a_checkpoint_naming_a_moved_module_is_refused_as_older_not_damaged(tmp_path, monkeypatch):
-    """A checkpoint of a SePS run before the layers had folders pickled ``oapo_lite.seps.Buffer``."""
+def _before_issue_35(ck: dict) -> None:
+    """A checkpoint in the layout before issue 35: the A2C family's state under "a2c", the PPO
+    family's keys at the top level."""
+    state = ck.pop("learner")
+    if "a2c" in state:
+        ck["a2c"] = state
+    else:
+        ck.update(state)
+
+
+@pytest.mark.parametrize("algo", ["oappo", "seps"])
+def test_a_checkpoint_in_the_layout_before_issue_35_resumes_bit_for_bit(tmp_path, algo):
+    """Older checkpoints still load: the run resumed from one ends where the run resumed from the
+    current layout ends (SePS after its pre-training, with its groups)."""
+    shape = dict(TINY, seps_pretrain_steps=160) if algo == "seps" else TINY
+    cfg = TrainConfig(algo=algo, steps=160 * 2, **shape)
+    longer = dataclasses.replace(cfg, steps=160 * 3)
+    train(cfg, tmp_path / "now", progress=False)
+    shutil.copytree(tmp_path / "now", tmp_path / "before")
+    ck = load_checkpoint(tmp_path / "before")
+    _before_issue_35(ck)
+    torch.save(ck, tmp_path / "before" / "checkpoint.pt")
+    ends = [train(longer, tmp_path / name, progress=False) for name in ("now", "before")]
+    pd.testing.assert_frame_equal(*ends)
+    assert _same(_params(tmp_path, "now"), _params(tmp_path, "before"))
+
+
+def test_a_pickled_object_of_a_moved_module_loads_from_its_new_home(tmp_path, monkeypatch):
+    """SePS's buffer, pickled by a checkpoint before issue 35 as ``oapo_lite.seps.Buffer``, loads as
+    ``oapo_lite.neural.seps.Buffer``; an object of an oapo_lite module that no longer exists is
+    refused as written by an older oapo_lite, not as damaged."""
     cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
     train(cfg, tmp_path, progress=False)
     ck = load_checkpoint(tmp_path)
-    old = types.ModuleType("oapo_lite.seps")
-    Buffer = type("Buffer", (), {"__module__": "oapo_lite.seps"})
-    old.Buffer = Buffer
-    monkeypatch.setitem(sys.modules, "oapo_lite.seps", old)
-    ck["learner"]["buffer"] = Buffer()
+    for name in ("seps", "gone"):
+        old = types.ModuleType(f"oapo_lite.{name}")
+        old.Buffer = type("Buffer", (), {"__module__": f"oapo_lite.{name}"})
+        monkeypatch.setitem(sys.modules, f"oapo_lite.{name}", old)
+        ck[name] = old.Buffer()
+        ck[name].records = [name]
+    torch.save({k: v for k, v in ck.items() if k != "gone"}, tmp_path / "seps.pt")
     torch.save(ck, tmp_path / "checkpoint.pt")
-    monkeypatch.delitem(sys.modules, "oapo_lite.seps")
-    with pytest.raises(ValueError, match=r"written by an older oapo_lite \(No module named 'oapo_lite.seps'\); start afresh"):
-        train(dataclasses.replace(cfg, steps=160 * 3), tmp_path, progress=False)
+    for name in ("seps", "gone"):
+        monkeypatch.delitem(sys.modules, f"oapo_lite.{name}")
+    (tmp_path / "old").mkdir()
+    (tmp_path / "seps.pt").rename(tmp_path / "old" / "checkpoint.pt")
+    buffer = load_checkpoint(tmp_path / "old")["seps"]
+    assert type(buffer) is seps.Buffer and buffer.records == ["seps"]
+    with pytest.raises(ValueError, match=r"written by an older oapo_lite \(No module named 'oapo_lite.gone'\); start afresh"):
+        load_checkpoint(tmp_path)
 
 
 def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):
@@ -519,8 +557,8 @@ def test_reuse_in_one_direction_between_different_spaces_raises():
     env = PettingZooVec(lambda: Toy(obs_dims=(3, 5)), n_envs=1)
     for one_way in ([[1, 0], [1, 1]], [[1, 1], [0, 1]]):  # b learns from a; a learns from b
         with pytest.raises(ValueError, match="needs equal spaces"):
-            check_spaces(env, np.array(one_way, bool))
-    check_spaces(env, np.eye(2, dtype=bool))  # own experience only
+            check_spaces(env.agents, seat_spaces(env), np.array(one_way, bool))
+    check_spaces(env.agents, seat_spaces(env), np.eye(2, dtype=bool))  # own experience only
 
 
 def test_an_agent_that_leaves_early_is_inactive_until_the_episode_resets():

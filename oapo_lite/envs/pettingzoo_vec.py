@@ -48,7 +48,7 @@ class PettingZooVec:
     """
 
     def __init__(self, env_fn: Callable[[], object], n_envs: int, seed: int = 0, max_steps: int | None = None):
-        self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
+        self.n_envs, self.max_steps = check_copies(n_envs, max_steps, own_limit=True)
         self.envs = [env_fn() for _ in range(self.n_envs)]
         self.seed = int(seed)
         first = self.envs[0]

@@ -6,7 +6,7 @@ overwritten by the next step: the loop copies what it keeps.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -36,19 +36,23 @@ class VecStep:
                    nan, nan.copy(), active)
 
 
+@runtime_checkable
 class VecEnv(Protocol):
     """An engine as the loop sees it."""
 
     n_envs: int
-    agents: list[str]  # seat names
-    agent_types: list[str]  # the kind of each seat: seats of one kind may share a network (TrainConfig.networks)
+    agents: Sequence[str]  # seat names
+    agent_types: Sequence[str]  # the kind of each seat: seats of one kind may share a network (TrainConfig.networks)
     n_agents: int
     n_actions: int  # per seat; the size of a Box action
     obs_dim: int
     state_dim: int  # the centralised critic's input
     continuous: bool  # Box actions: a Gaussian policy
     time_in_state: bool  # the state carries the time left: the time limit is part of the game, no bootstrap there
-    optimum: float  # the best team return where an oracle knows it; NaN otherwise
+
+    @property
+    def optimum(self) -> float:
+        """The best team return where an oracle knows it; NaN otherwise."""
 
     def reset(self) -> VecStep: ...
 
@@ -79,10 +83,18 @@ class HasSeatSpaces(Protocol):
     spaces: tuple  # per seat: (observation space, action space)
 
 
-def check_copies(n_envs, max_steps=None) -> tuple[int, int | None]:
-    """``n_envs`` and ``max_steps`` (None: the engine's own limit) as integers, or a ValueError
-    naming the bad one: the checks every engine's constructor makes first."""
+def seat_spaces(env) -> tuple | None:
+    """Every seat's (observation, action) spaces where they may differ; None where the engine
+    builds every seat alike."""
+    return env.spaces if isinstance(env, HasSeatSpaces) else None
+
+
+def check_copies(n_envs, max_steps, own_limit: bool = False) -> tuple[int, int | None]:
+    """``n_envs`` and ``max_steps`` as integers, or a ValueError naming the bad one: the checks
+    every engine's constructor makes first. ``own_limit``: the engine may end episodes itself,
+    so ``max_steps`` may be None (a PettingZoo env)."""
     for name, value in (("n_envs", n_envs), ("max_steps", max_steps)):
-        if value is not None and (int(value) != value or value < 1):
+        if not (value is None and name == "max_steps" and own_limit) and not (
+                isinstance(value, (int, float, np.integer)) and int(value) == value and value >= 1):
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     return int(n_envs), None if max_steps is None else int(max_steps)

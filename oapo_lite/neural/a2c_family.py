@@ -1,4 +1,6 @@
-"""SEAC (Christianos et al., NeurIPS 2020) and the A2C that SePS trains with.
+"""The A2C family: SEAC (Christianos et al., NeurIPS 2020) and the A2C that SePS trains with
+(``A2CFamilyLearner``, the family's side of ``learner.Learner``), and the shape of its runs
+beside a PPO-family run (``beside_ppo``).
 
 Both are advantage actor-critic with n-step returns and a critic V(o) per network (not the
 centralised V(s) of the PPO family); each network has one Adam over its actor and its critic,
@@ -25,6 +27,7 @@ import torch
 from torch import nn
 
 from oapo_lite import reuse
+from oapo_lite.envs.vec import seat_spaces
 from oapo_lite.neural import seps
 from oapo_lite.neural.adam import Adam
 from oapo_lite.neural.config import TrainConfig
@@ -194,7 +197,8 @@ class A2CFamilyLearner:
         n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
         if self.seps and cfg.seps_clusters is not None and not 1 <= cfg.seps_clusters <= n:
             raise ValueError(f"seps_clusters = {cfg.seps_clusters} is invalid for {n} agents; allowed: None or 1..{n}")
-        reuse.check_spaces(env, np.ones((n, n), bool))  # SEAC learns from every seat, SePS may group any
+        # SEAC learns from every seat, SePS may group any
+        reuse.check_spaces(env.agents, seat_spaces(env), np.ones((n, n), bool))
         # the draws of the PPO family's critic, which SEAC / SePS do not have: their networks keep
         # the initialisation their committed runs were trained with
         Critic(env.state_dim, cfg.hidden, gen)

@@ -5,23 +5,20 @@
 - ``a2c_family.A2CFamilyLearner``: SEAC and SePS (advantage actor-critic, a critic per network).
 
 The loop builds a learner right after the actors, from the same generator, so that a run is
-reproducible from its seed; a checkpoint keeps its ``state_dict`` under the one key ``"learner"``.
+reproducible from its seed (``runstate.RunState.start``); a checkpoint keeps its ``state_dict``
+under the one key ``"learner"``.
 """
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import torch
 
-from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs.vec import VecStep
-from oapo_lite.neural.a2c_family import A2CFamilyLearner
-from oapo_lite.neural.config import TrainConfig
-from oapo_lite.neural.nets import Actors
-from oapo_lite.neural.ppo_family import PPOFamilyLearner
 from oapo_lite.neural.rollout import Rollout
 
 
+@runtime_checkable
 class Learner(Protocol):
     owner: list[int]  # the network of every seat, which the rollouts and evaluations act with
 
@@ -40,7 +37,3 @@ class Learner(Protocol):
     def load_state_dict(self, state: dict) -> None:
         """Continue from ``state_dict()``'s output."""
 
-
-def make_learner(cfg: TrainConfig, env, actors: Actors, gen: torch.Generator) -> Learner:
-    """The learner of ``cfg.algo``'s family."""
-    return (A2CFamilyLearner if ALGOS[cfg.algo].a2c else PPOFamilyLearner)(cfg, env, actors, gen)

@@ -14,11 +14,12 @@ import torch
 
 from oapo_lite import reuse
 from oapo_lite.algorithms import ALGOS, AlgoSpec
+from oapo_lite.envs.vec import seat_spaces
 from oapo_lite.neural import adaptive
 from oapo_lite.neural.adam import Adam
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.losses import (Diverged, check_finite, explained_variance, gae, normalise, off_agent_objective,
-                              source_mean, update_diagnostics, update_factor, value_loss, weighted_kl)
+                                     source_mean, update_diagnostics, update_factor, value_loss, weighted_kl)
 from oapo_lite.neural.nets import Actors, Critic, ValueNorm, owners
 from oapo_lite.neural.rollout import Inputs, Rollout, States, mean_or_nan
 from oapo_lite.neural.trpo import trpo_step
@@ -186,7 +187,7 @@ def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarr
     """(n, n, folds, P): row i, column j is the gradient, in learner i's parameters as they are
     now, of its update objective (Eq. 8 with ``clip``, Eq. 7's surrogate with ``clip=None``) on
     source j's samples alone, with the factor rho = 1 (nobody has moved yet); with ``folds`` > 1,
-    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. LearnerBatch
+    once per fold of env copies (copy e in fold e % folds), each the mean over its fold. Sources
     that M[i] gives no weight get zeros (the adaptive rule only rescales what Eq. 9 allows).
     Separate nets only."""
     n, n_envs = M.shape[0], batch.reward.shape[1]
@@ -288,12 +289,9 @@ class PPOFamilyLearner:
         self.owner = owners(cfg.network_kind, env.agent_types)
         self.allowed = reuse.allowed_mask(cfg.allowed, env.agents)
         same_net = np.equal.outer(self.owner, self.owner)  # seats of one network need equal spaces too
-        if self.spec.reuse == "uniform":
-            reuse.check_spaces(env, np.ones((n, n), bool))
-        elif self.spec.reuse == "oapo":
-            reuse.check_spaces(env, same_net | (np.ones((n, n), bool) if self.allowed is None else self.allowed))
-        else:
-            reuse.check_spaces(env, same_net)
+        pairs = {"uniform": np.ones((n, n), bool),
+                 "oapo": same_net | (np.ones((n, n), bool) if self.allowed is None else self.allowed)}
+        reuse.check_spaces(env.agents, seat_spaces(env), pairs.get(self.spec.reuse, same_net))
         # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
         self.critic = Critic(env.state_dim, cfg.hidden, gen, cfg.feature_norm)

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import pickle
 import subprocess
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,13 +15,29 @@ import numpy as np
 import pandas as pd
 import torch
 
+from oapo_lite.algorithms import ALGOS
+from oapo_lite.neural.a2c_family import A2CFamilyLearner
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.neural.learner import Learner, make_learner
+from oapo_lite.neural.learner import Learner
 from oapo_lite.neural.nets import Actors, owners
+from oapo_lite.neural.ppo_family import PPOFamilyLearner
 from oapo_lite.neural.rollout import make_env
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
+# a SePS checkpoint written during pre-training before issue 35 moved the modules into layer
+# folders pickled its buffer by the old path (the only object of a moved module a checkpoint holds)
+MOVED = {"oapo_lite.seps": "oapo_lite.neural.seps"}
+# the keys under which a checkpoint before issue 35 kept its learner's state: the PPO family's at the top
+PPO_KEYS_BEFORE = ("critic", "value_norm", "critic_opt", "np_rng")
+
+
+class _Unpickler(pickle.Unpickler):
+    def find_class(self, module: str, name: str):
+        return super().find_class(MOVED.get(module, module), name)
+
+
+_PICKLE = types.SimpleNamespace(Unpickler=_Unpickler, load=pickle.load, __name__="pickle")
 
 
 def derive_seed(*keys: int) -> int:
@@ -67,7 +85,7 @@ class RunState:
         init_gen = torch.Generator().manual_seed(cfg.seed)
         actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,
                         env.continuous, init_gen, cfg.feature_norm)
-        learner = make_learner(cfg, env, actors, init_gen)
+        learner = (A2CFamilyLearner if ALGOS[cfg.algo].a2c else PPOFamilyLearner)(cfg, env, actors, init_gen)
         act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))
         return cls(cfg, env, eval_env, actors, learner, act_gen, env.reset())
 
@@ -88,7 +106,7 @@ class RunState:
         check_resumable(self.cfg, ck)
         try:
             self.actors.load_state_dict(ck["actors"])
-            self.learner.load_state_dict(ck["learner"])
+            self.learner.load_state_dict(ck["learner"] if "learner" in ck else learner_state_before(ck))
             self.act_gen.set_state(ck["act_gen"])
             torch.set_rng_state(ck["torch_rng"])
             self.env.set_state(ck["env"])
@@ -114,12 +132,12 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     ``store.DamagedFile`` naming it if it cannot be read."""
     path = Path(out_dir) / "checkpoint.pt"
     try:
-        ck = torch.load(path, weights_only=False)
+        ck = torch.load(path, weights_only=False, pickle_module=_PICKLE)
     except (FileNotFoundError, PermissionError):  # absent or unreadable, not damaged: starting afresh would lose it
         raise
     except (ModuleNotFoundError, AttributeError) as err:  # pickled objects of a module since moved or renamed
         if "oapo_lite" not in str(err):
-            raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}); "
+            raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {err}); "
                               f"{START_AFRESH}") from None
         raise ValueError(f"checkpoint {path} was written by an older oapo_lite ({err}); {START_AFRESH}") from None
     except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
@@ -129,6 +147,14 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     if not isinstance(ck, dict) or "config" not in ck:
         raise DamagedFile(f"checkpoint {path} is not an oapo_lite checkpoint; {START_AFRESH}")
     return ck
+
+
+def learner_state_before(ck: dict) -> dict:
+    """The learner's state of a checkpoint written before issue 35 gave it the one key "learner":
+    the A2C family's was under "a2c", the PPO family's keys were at the top level."""
+    if "a2c" in ck:
+        return ck["a2c"]
+    return {k: v for k, v in ck.items() if k in PPO_KEYS_BEFORE or k.startswith("actor_opt")}
 
 
 def load_history(out_dir: str | Path) -> list[dict]:

@@ -11,7 +11,7 @@ from oapo_lite.neural.a2c_family import beside_ppo
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.reuse import KL_REDUCES, SCHEMES
 from oapo_lite.study.verdicts import (FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, reliable,
-                                stabler, stuck)
+                                      stabler, stuck)
 
 
 @dataclass(frozen=True)
@@ -478,7 +478,10 @@ def runs_of(figure: "Figure | str", budget: str) -> list[Run]:
 def _config(b: Budget, **kw) -> TrainConfig:
     """A run's config at budget ``b``; A2C runs take the shape that evaluates them at the PPO
     family's env steps (``a2c_family.beside_ppo``)."""
-    kw = {**b.config, **kw, "steps": b.steps, "eval_every": b.eval_every, "eval_episodes": b.eval_episodes}
+    kw, budget = {**b.config, **kw}, dict(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes)
+    if budget.keys() & kw.keys():
+        raise ValueError(f"a curve or budget config sets {sorted(budget.keys() & kw.keys())}, which the budget decides")
+    kw |= budget
     return TrainConfig(**(beside_ppo(kw) if ALGOS[kw["algo"]].a2c else kw))
 
 

@@ -204,7 +204,7 @@ def summary(df: pd.DataFrame, threshold: float | None = None, metric: Metric = F
                                y=metric.column))
 
 
-# --- interval estimates -------------------------------------------------------------------
+# --- the evidence a verdict reads: curves compared by interval estimates -------------------
 
 def paired_difference(df: pd.DataFrame, a, b, y: str, tail: float = 0.2) -> tuple[pd.DataFrame, Interval]:
     """Curve ``a`` against curve ``b`` seed by seed: per seed both runs' final value (the mean of
