@@ -343,8 +343,8 @@ GRID = (
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
                "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
-                                                   "smax:2s3z": dict(steps=500_000, eval_every=10),
-                                                   "smax:6h_vs_8z": dict(steps=500_000, eval_every=10),
+                                                   "smax:2s3z": dict(steps=1_000_000, eval_every=10),
+                                                   "smax:6h_vs_8z": dict(steps=1_000_000, eval_every=10),
                                                    "smax:3s5z_vs_3s6z": dict(steps=3_000_000, eval_every=40, seeds=(0, 1, 2))}),
                "paper": dict(eval_episodes=64, eval_every=25, envs={
                    "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
