@@ -335,7 +335,7 @@ GRID = (
                                   ("oappo entropy x W[i,i]", dict(algo="oappo", entropy_by_weight=True))),
            common=dict(env="black_red"), notebook="17_adaptive_reuse"),
     # label: the algorithm or reading (``smax_curves``); the map is the ``env`` column. ``cpu``:
-    # the small maps and the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) at 5 seeds;
+    # the small maps and the paper's 6h_vs_8z (1M steps, 2.5% of HARL's) at 5 seeds;
     # 3s5z_vs_3s6z at 3M (15%; the separate nets learn 2.6-3.1x slower than MAPPO, which first
     # wins there at about 500k) for its three curves at 3 seeds (ASSUMPTIONS.md); the MMM2 stand-in
     # and the paper's steps run at ``paper``.
