@@ -46,7 +46,7 @@ def test_glance_budgets_are_shares_of_the_paper():
     assert claims.budget_share("fig3b", None) == "240k steps x 5 seeds; our budget, the paper gives none"
     assert claims.budget_share("fig6b", "grf:academy_3_vs_1_with_keeper") == \
         "32k steps x 3 seeds = 0.13% of 25M (HARL's tuned GRF steps)"
-    assert claims.budget_share("fig4_smax", "smax:6h_vs_8z") == "500k steps x 5 seeds = 1.2% of 40M (HARL's steps for the map)"
+    assert claims.budget_share("fig4_smax", "smax:6h_vs_8z") == "1M steps x 5 seeds = 2.5% of 40M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:3s5z_vs_3s6z") == "3M steps x 3 seeds = 15% of 20M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:MMM2_like_7m2M_vs_8m3M").startswith("not run at `cpu`")
 

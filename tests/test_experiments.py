@@ -126,7 +126,7 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
     # SMAX's cpu grid: the small maps and two of the paper's, each with its own steps; MMM2's
     # stand-in at paper only
     assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {
-        "smax:3m": 300_000, "smax:2s3z": 500_000, "smax:6h_vs_8z": 500_000, "smax:3s5z_vs_3s6z": 3_000_000}
+        "smax:3m": 300_000, "smax:2s3z": 1_000_000, "smax:6h_vs_8z": 1_000_000, "smax:3s5z_vs_3s6z": 3_000_000}
     # issue 32: every family at its sweep's choice, OAPPO's per-kind reading only where kinds differ,
     # and the 3M-step map for MAPPO, HAPPO and the per-kind reading alone
     by_env = {e: {r.label for r in cpu["fig4_smax"] if r.cfg.env == e} for e in grid.get_figure("fig4_smax").envs("cpu")}

@@ -332,7 +332,7 @@ GRID = (
                                   ("oappo entropy x W[i,i]", dict(algo="oappo", entropy_by_weight=True))),
            common=dict(env="black_red"), notebook="17_adaptive_reuse"),
     # label: the algorithm or reading (``smax_curves``); the map is the ``env`` column. ``cpu``:
-    # the small maps and the paper's 6h_vs_8z (500k steps, 1.25% of HARL's) at 5 seeds;
+    # the small maps and the paper's 6h_vs_8z (1M steps, 2.5% of HARL's) at 5 seeds;
     # 3s5z_vs_3s6z at 3M (15%; the separate nets learn several times slower than MAPPO there)
     # for its three curves at 3 seeds (ASSUMPTIONS.md); the MMM2 stand-in
     # and the paper's steps run at ``paper``.
@@ -340,8 +340,8 @@ GRID = (
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=ENGINE_BUDGETS, budgets={
                "smoke": dict(eval_episodes=8, envs={"smax:3m": dict(steps=6_400, eval_every=1)}),
                "cpu": dict(eval_episodes=64, envs={"smax:3m": dict(steps=300_000, eval_every=10),
-                                                   "smax:2s3z": dict(steps=500_000, eval_every=10),
-                                                   "smax:6h_vs_8z": dict(steps=500_000, eval_every=10),
+                                                   "smax:2s3z": dict(steps=1_000_000, eval_every=10),
+                                                   "smax:6h_vs_8z": dict(steps=1_000_000, eval_every=10),
                                                    "smax:3s5z_vs_3s6z": dict(steps=3_000_000, eval_every=40, seeds=(0, 1, 2))}),
                "paper": dict(eval_episodes=64, eval_every=25, envs={
                    "smax:3m": dict(steps=2_000_000), "smax:2s3z": dict(steps=5_000_000),
