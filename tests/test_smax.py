@@ -183,3 +183,28 @@ def test_importing_jaxmarl_through_the_engine_keeps_the_notebook_s_output_stream
                           capture_output=True, text=True, check=True)
     assert bare.stdout.endswith("False") and "Importing" in bare.stdout
     assert kept.stdout == "True"  # and nothing of jaxmarl's own printing reaches the output
+
+
+def test_two_accepted_seeds_never_replay_one_smax_episode(env):
+    """SMAX's key holds the seed's 32 bits (2**32 would alias 0, and is refused by the config):
+    the seeds at the ends of the accepted range start other battles than seed 0."""
+    first = {}
+    for seed in (0, 1, 2**31, 2**32 - 1):
+        env.seed = seed  # as SmaxVec(..., seed=seed) would, without building another env
+        first[seed] = env.reset().state.tobytes()
+    env.seed = 0
+    assert len(set(first.values())) == 4
+    with pytest.raises(ValueError, match=r"seed = 4294967296 is invalid; allowed: an integer in \[0, 4294967295\]"):
+        TrainConfig(algo="happo", env="smax:3m", seed=2**32)
+
+
+def test_an_evaluation_counts_the_battles_that_reach_the_time_limit():
+    """SMAX ends a battle at its time limit on the step after the max_steps-th: in 3 steps nobody
+    can die, so every one of them ends there, and counts, as a battle not won."""
+    from oapo_lite.neural.rollout import episode_scores
+
+    short = SmaxVec("3m", 4, seed=0, max_steps=3)
+    gen = torch.Generator().manual_seed(0)
+    actors = Actors(1, short.obs_dim, short.n_actions, (16,), False, gen)
+    ret, won = episode_scores(actors, [0, 0, 0], short, gen, 3)
+    assert np.isfinite(ret) and won == 0.0

@@ -193,7 +193,9 @@ def episode_scores(actors: Actors, owner: list[int], env: VecEnv, gen: torch.Gen
     some = isinstance(env, StepsSomeCopies)
     with torch.inference_mode():
         weights = actors.stack(owner)
-        for _ in range(max_steps):
+        # SMAX ends an episode that reaches its time limit on the step after the max_steps-th;
+        # one step fewer left those copies out, so a time-out was never counted as a loss
+        for _ in range(max_steps + 1):
             # every copy's action is drawn, so the generator's draws do not depend on who still plays
             actions = sample_actions(actors, weights, step, gen)[0].transpose(0, 1).numpy()
             step = env.step_only(actions, np.isnan(ret)) if some else env.step(actions)
