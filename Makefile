@@ -2,6 +2,7 @@
 # Both build .venv from environment.txt the first time.
 PY := .venv/bin/python
 BUDGET ?= smoke
+START := $(shell date +%s)
 
 .PHONY: reproduce test venv grf book book-deps browser clean
 
@@ -56,15 +57,13 @@ reproduce: venv
 	$(PY) -m oapo_lite reproduce --budget $(BUDGET)
 
 # tests/test_book.py builds the book and opens every page in headless Chromium; tests/test_grf.py
-# needs the real GRF engine. tests/numeric_paths.py runs the unit tests again, and nbval (the
-# committed notebook outputs, executed again here and compared as text), under numeric paths that
-# pick other floating-point kernels on this machine, as another CPU would; it prints how many
-# compared cells moved on each (ASSUMPTIONS.md, "Across machines").
+# needs the real GRF engine. tests/numeric_paths.py runs the numeric unit tests again, and nbval
+# (the committed notebook outputs, executed again here and compared as text), under numeric paths
+# that pick other floating-point kernels on this machine, as another CPU would; it prints how many
+# compared cells moved on each (ASSUMPTIONS.md, "Across machines"). tests/stages.py runs the
+# stages below and prints the time of each, set-up included, at the end.
 test: venv book-deps browser grf
-	$(PY) -m pytest -q tests
-	$(PY) tests/numeric_paths.py unit
-	$(PY) -m oapo_lite reproduce --budget smoke --check
-	$(PY) tests/numeric_paths.py nbval
+	$(PY) tests/stages.py $(START)
 
 clean:
 	rm -rf .venv build figures/smoke

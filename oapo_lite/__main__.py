@@ -46,21 +46,25 @@ class _Renamed(argparse.Action):
 
 
 def train_parser() -> argparse.ArgumentParser:
-    from oapo_lite.neural.config import RENAMED, TrainConfig
+    from oapo_lite.neural.config import ALLOWED, MEANING, RENAMED, TrainConfig
 
-    parser = cli.Parser(prog="python -m oapo_lite train", description="Train one run.")
+    parser = cli.Parser(prog="python -m oapo_lite train", usage="%(prog)s [--algo ALGO] [--env ENV] [--seed SEED] "
+                        "[--FIELD VALUE ...] [--out FOLDER] [--no-resume] [--no-progress] [--tensorboard FOLDER]",
+                        description="Train one run. Every flag but the last four "
+                        "is a field of oapo_lite.neural.config.TrainConfig; none or true / false where a field takes "
+                        "None or True / False.")
     special = {
         "hidden": dict(type=int, nargs="+"),
-        "allowed": dict(type=_none_or(str), help="none or a scheme: NR, UR, RR, AR"),
-        "networks": dict(type=_none_or(str), help="none (the algorithm's choice), agent, type or one"),
-        "bootstrap_truncation": dict(type=_none_or(_bool), help="none (no on the built-in mazes), true or false"),
-        "reuse_adapt": dict(type=_none_or(str), help="none (Eq. 9 as written), gradient, gradient_sign or "
-                                                     "gradient_test (oapo_lite/neural/adaptive.py)"),
-        "seps_clusters": dict(type=_none_or(int), help="none (chosen by the Davies-Bouldin index) or a number"),
-        "env": dict(type=str, help=f"a built-in map {sorted(MAPS)}, a path to a map text file, or "
-                                   "<engine>:<name> of a real engine, e.g. smax:3m, mamujoco:HalfCheetah-2x3, "
-                                   "grf:academy_3_vs_1_with_keeper"),
+        "allowed": dict(type=_none_or(str)),
+        "networks": dict(type=_none_or(str)),
+        "bootstrap_truncation": dict(type=_none_or(_bool)),
+        "reuse_adapt": dict(type=_none_or(str)),
+        "seps_clusters": dict(type=_none_or(int)),
+        "env": dict(type=str),
     }
+    # on the command line, a map file's path too
+    allowed = {**ALLOWED, "env": f"a built-in map {sorted(MAPS)}, a path to a map text file, or <engine>:<name> of a "
+                                 "real engine, e.g. smax:3m, mamujoco:HalfCheetah-2x3, grf:academy_3_vs_1_with_keeper"}
     for old, new in RENAMED.items():
         parser.add_argument(*dict.fromkeys([f"--{old.replace('_', '-')}", f"--{old}"]), action=_Renamed, new=new,
                             default=argparse.SUPPRESS, help=argparse.SUPPRESS)
@@ -70,12 +74,18 @@ def train_parser() -> argparse.ArgumentParser:
         # type=bool would read "false" as True: a non-empty string
         options = special.get(f.name, dict(type=_bool if isinstance(f.default, bool) else type(f.default)))
         flags = dict.fromkeys([f"--{f.name.replace('_', '-')}", f"--{f.name}"])  # --n-envs and --n_envs
-        parser.add_argument(*flags, dest=f.name, default=f.default, **options)
-    parser.add_argument("--out", default="runs", help="parent folder of the run folder")
-    parser.add_argument("--no-resume", action="store_true", help="start afresh even if a checkpoint exists")
-    parser.add_argument("--no-progress", action="store_true")
+        default = " ".join(map(str, f.default)) if isinstance(f.default, tuple) else f.default
+        parser.add_argument(*flags, dest=f.name, default=f.default, **options,
+                            help=cli.flag_help(MEANING[f.name], default, allowed[f.name]))
+    parser.add_argument("--out", default="runs", help=cli.flag_help("parent folder of the run folder", "runs",
+                                                                    "a folder path"))
+    parser.add_argument("--no-resume", action="store_true",
+                        help=cli.flag_help("start afresh even if the run folder holds a checkpoint", "resume"))
+    parser.add_argument("--no-progress", action="store_true",
+                        help=cli.flag_help("no progress bar (a line of results at the end still)", "a bar"))
     parser.add_argument("--tensorboard", metavar="FOLDER", default=None,
-                        help="also write the live diagnostics as TensorBoard scalars there (tensorboard --logdir FOLDER)")
+                        help=cli.flag_help("also write the live diagnostics as TensorBoard scalars there "
+                                           "(tensorboard --logdir FOLDER)", "none", "a folder path"))
     return parser
 
 
@@ -93,10 +103,11 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
                          f"{readers(action.dest)} read it")
     board = args.get("tensorboard")
     if board is not None:
-        folder = Path(board)
-        if not board.strip() or folder.exists() and not folder.is_dir():
-            parser.error(f"--tensorboard {board!r} is not a folder; allowed: a folder to write the scalars into")
-        why = cannot_write(folder)
+        try:
+            args["tensorboard"] = folder = str(cli.output_folder(board, "--tensorboard"))
+        except ValueError as err:
+            parser.error(str(err))
+        why = cannot_write(Path(folder))
         if why:
             parser.error(f"--tensorboard {board!r} cannot be written ({why}); choose another folder")
 
@@ -124,7 +135,8 @@ def train_main(argv: list[str]) -> int:
     parser = train_parser()
     args = vars(parser.parse_args(argv))
     _refuse_unhonoured(parser, argv, args)
-    out, resume, progress = Path(args.pop("out")), not args.pop("no_resume"), not args.pop("no_progress")
+    out, resume, progress = cli.output_folder(args.pop("out"), "--out"), not args.pop("no_resume"), \
+        not args.pop("no_progress")
     tensorboard = args.pop("tensorboard")
     name, file_name = args["env"], None
     if name not in MAPS and Path(name).is_dir():

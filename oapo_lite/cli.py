@@ -8,6 +8,7 @@ import errno
 import os
 import re
 import sys
+from pathlib import Path
 
 
 class Parser(argparse.ArgumentParser):
@@ -32,9 +33,35 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def flag_help(meaning: str, default, allowed: str | None = None) -> str:
+    """A flag's line of ``--help``: what it means, its default and (for a flag with a value) what
+    it allows. (argparse formats help with %, so a literal % is doubled.)"""
+    text = f"{meaning} (default: {default}" + (f"; allowed: {allowed})" if allowed else ")")
+    return text.replace("%", "%%")
+
+
 def times_given(action: argparse.Action, args: list[str]) -> int:
     """How often ``args`` give the flag of ``action`` (as ``--flag value`` or ``--flag=value``)."""
     return sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in args)
+
+
+def output_folder(text: str, what: str) -> Path:
+    """An output folder given on the command line or in the environment (``what`` names where),
+    resolved to an absolute path once, at the start of a command, so that every process and
+    notebook it starts writes to the same place; an empty path (which would name the working
+    folder), the filesystem root, a file and a link to a missing folder are refused."""
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError(f"{what} {text!r} is empty; allowed: a folder path (. for the working folder)")
+    path = Path(text).expanduser()
+    if path.is_symlink() and not path.exists():
+        raise ValueError(f"{what} {text!r} is a link to {os.readlink(path)!r}, which does not exist; allowed: a folder "
+                         "or a link to one")
+    path = path.resolve()
+    if path == path.parent:
+        raise ValueError(f"{what} {text!r} is the filesystem root; allowed: a folder below it")
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{what} {text!r} is a file; allowed: a folder")
+    return path
 
 
 def debug_requested(argv: list[str]) -> bool:
@@ -50,6 +77,12 @@ RESOURCES = {
     errno.EPERM: "operation not permitted{where}; fix its permissions, or write elsewhere (--out, OAPO_FIGURES)",
     errno.EROFS: "read-only file system{where}; write elsewhere (--out, OAPO_FIGURES)",
 }
+
+
+# bad values, damaged or unwritable files, a missing engine, a run that diverged (the neural
+# track's Diverged is the only FloatingPointError here: numpy's error state is never "raise"):
+# the message says what and what to do; anything else is a bug
+KNOWN = (ValueError, OSError, ImportError, FloatingPointError)
 
 
 def resource_error(err: BaseException) -> str | None:
@@ -69,10 +102,7 @@ def report(err: Exception) -> int:
     if resource:
         print(f"error: {resource}", file=sys.stderr)
         return 2
-    # bad values, damaged or unwritable files, a missing engine, a run that diverged (the neural
-    # track's Diverged is the only FloatingPointError here: numpy's error state is never "raise"):
-    # the message says what and what to do; anything else is a bug
-    known = isinstance(err, (ValueError, OSError, ImportError, FloatingPointError))
+    known = isinstance(err, KNOWN)
     text = " ".join(str(err).split()) or type(err).__name__
     print(f"error: {text}" if known else f"error: {type(err).__name__}: {text} (a bug in oapo_lite? rerun with "
           "--debug for the traceback)", file=sys.stderr)

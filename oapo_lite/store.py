@@ -113,7 +113,11 @@ class Lock:
         self.path, self._fd = Path(path), None
 
     def acquire(self, wait: bool = True) -> bool:
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except IsADirectoryError:
+            raise ValueError(f"the lock file {self.path} is a folder; delete it (a lock holds nothing: it keeps two "
+                             "processes from writing one run at once)") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:

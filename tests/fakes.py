@@ -4,6 +4,8 @@ import numpy as np
 import pandas as pd
 
 from oapo_lite import store
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.envs.oracle import optimal_return
 from oapo_lite.study import experiments
 
 
@@ -12,10 +14,13 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     multiple of ``grid``: a curve that moves only every ``grid`` env steps, whatever the
     config's evaluation grid. ``columns`` adds or replaces columns."""
     steps = np.array(cfg.eval_steps)
-    value = frac(steps // grid * grid)
+    value = np.asarray(frac(steps // grid * grid), dtype=float)
     config = {k: v for k, v in cfg.flat().items() if v is not None}  # as a real run file holds them
-    df = pd.DataFrame({**config, "iteration": steps // cfg.iteration_steps,
-                       "step": steps, "eval_return": value, "frac_opt": value, "eval_success": value,
+    maze = env_registry.maze_of(cfg.env)  # a maze's return is its fraction of the oracle's optimum
+    optimum = optimal_return(maze) if maze is not None else np.nan
+    df = pd.DataFrame({**config, "iteration": steps // cfg.iteration_steps, "step": steps,
+                       "eval_return": value * optimum if maze is not None else value,
+                       "frac_opt": value if maze is not None else np.nan, "eval_success": np.clip(value, 0, 1),
                        "git_rev": "test", **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))
     return df

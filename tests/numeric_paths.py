@@ -12,9 +12,10 @@ once, as another CPU would:
 - ``scalar``: ATen's scalar kernels, MKL's compatible (SSE2) code path, numpy's baseline loops.
 
 Notebook outputs that nbval compares must not move on any of them (ASSUMPTIONS.md, "Across
-machines"); the unit tests must pass on each.
+machines"); the unit tests whose outcome can depend on the kernels (marked ``numeric`` by
+``tests/conftest.py``) must pass on each; the others run once, on the default path.
 
-    python tests/numeric_paths.py unit [PATH ...]    # the unit tests (every path but the default)
+    python tests/numeric_paths.py unit [PATH ...]    # the numeric unit tests (every path but the default)
     python tests/numeric_paths.py nbval [PATH ...]   # nbval of every notebook (every path), a report
 
 ``nbval`` prints, per notebook, how many cells nbval compares and how many of them moved under
@@ -86,8 +87,8 @@ def run_unit(names: list[str]) -> int:
     failed = False
     for name in names:
         print(f"unit tests, numeric path {name}: {paths()[name] or 'as this machine picks'}", flush=True)
-        failed |= subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests"],
-                                 cwd=ROOT, env=environment(name)).returncode != 0
+        failed |= subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "numeric",
+                                  "tests"], cwd=ROOT, env=environment(name)).returncode != 0
     return int(failed)
 
 

@@ -1,6 +1,7 @@
 """Bad input and damaged files, as a user meets them: every command-line error is one line with
 exit status 2 and no traceback; no damaged file is loaded or loses a result; killed and
 concurrent writers leave nothing behind and train nothing twice."""
+import argparse
 import errno
 import os
 import re
@@ -10,10 +11,12 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 
 import fakes
 
@@ -78,7 +81,9 @@ def _cli_error(capsys, *argv) -> str:
     (["--lr-ann", "true"], ["unrecognized arguments: --lr-ann"]),  # an abbreviation could name another flag
     (["--seed", "1", "--seed", "2"], ["--seed is given 2 times; give it once"]),
     (["--steps", "599"], ["--steps 599 is not a whole number of iterations", "a multiple of 200, e.g. 400 or 600"]),
-    (["--tensorboard", ""], ["--tensorboard '' is not a folder"]),
+    (["--tensorboard", ""], ["--tensorboard '' is empty; allowed: a folder path"]),
+    (["--tensorboard", "/"], ["--tensorboard '/' is the filesystem root"]),
+    (["--seed", "4294967296"], ["seed = 4294967296 is invalid; allowed: an integer in [0, 4294967295]"]),
     (["--env", "maps/no_such_map.txt"], ["no such map file"]),
     (["--algo", "seps", "--seps-clusters", "5", "--seps-pretrain-steps", "200"], ["seps_clusters = 5", "2 agents"]),
     (["--eval-episodes", "10000000000"], ["out of memory", "--eval-episodes"]),
@@ -102,7 +107,41 @@ def test_an_output_folder_that_cannot_be_made_is_named(tmp_path, capsys, out):
     (tmp_path / "a_file").write_text("x")
     target = out if out.startswith("/") else str(tmp_path / out)
     err = _cli_error(capsys, "train", *QUICK, "--out", target)
-    assert f"cannot create the run folder {target}/" in err and "another output folder (--out" in err
+    assert (f"cannot create the run folder {target}/" in err and "another output folder (--out" in err
+            or f"--out {target!r} is a file; allowed: a folder" in err)
+
+
+@pytest.mark.parametrize("command, out, words", [
+    ("train", "", "--out '' is empty; allowed: a folder path (. for the working folder)"),
+    ("train", "/", "--out '/' is the filesystem root; allowed: a folder below it"),
+    ("train", "dangling", "--out '{tmp}/dangling' is a link to '{tmp}/nowhere', which does not exist"),
+    ("book", "", "--out '' is empty"),
+    ("book", "/", "--out '/' is the filesystem root"),
+    ("book", ".", "holds files the book did not write; allowed: an empty or new folder"),
+])
+def test_an_output_path_that_would_alias_another_folder_is_refused(tmp_path, capsys, monkeypatch, command, out, words):
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    (tmp_path / "notes.txt").write_text("a user's file")
+    monkeypatch.chdir(tmp_path)
+    path = str(tmp_path / out) if out == "dangling" else out
+    err = _cli_error(capsys, command, *(QUICK if command == "train" else []), "--out", path)
+    assert words.format(tmp=tmp_path) in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "notes.txt"]  # nothing written
+
+
+def test_a_relative_oapo_figures_is_resolved_once_and_a_moved_tree_without_the_committed_runs_is_refused(
+        tmp_path, capsys, monkeypatch):
+    from oapo_lite.study import reproduce
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("OAPO_FIGURES", "moved")
+    err = _cli_error(capsys, "reproduce", "--budget", "smoke", "--figures", "fig1")
+    assert f"OAPO_FIGURES={str(tmp_path / 'moved')!r} lacks" in err and "the notebooks read" in err
+    assert os.environ["OAPO_FIGURES"] == str(tmp_path / "moved")  # what the notebooks and workers are given
+    shutil.copytree(experiments.ROOT / "figures", tmp_path / "moved", ignore=shutil.ignore_patterns("checkpoints"))
+    monkeypatch.setattr(reproduce, "run_notebooks", lambda *a: [])  # the check passes: training starts
+    assert cli.main(["reproduce", "--budget", "smoke", "--figures", "fig1", "--check"]) == 0
+    assert experiments.missing_runs("fig1", "smoke") == [] and (tmp_path / "moved" / "smoke" / "data").is_dir()
 
 
 def test_run_folders_carry_the_config_hash_so_settings_never_collide(tmp_path, capsys):
@@ -169,7 +208,8 @@ def test_oapo_figures_that_cannot_be_written_is_one_line(tmp_path, capsys, monke
     target = target if target.startswith("/") else str(tmp_path / target)
     monkeypatch.setenv("OAPO_FIGURES", target)
     err = _cli_error(capsys, "reproduce", "--skip-notebooks")
-    assert f"OAPO_FIGURES='{target}'" in err and "cannot write results" in err
+    assert f"OAPO_FIGURES='{target}'" in err and "cannot write results" in err \
+        or f"OAPO_FIGURES '{target}' is a file; allowed: a folder" in err
 
 
 @pytest.mark.parametrize("damage", [
@@ -318,7 +358,9 @@ def test_checkpoint_errors_name_the_seats_of_a_numpy_integer_learner(tmp_path):
     (dict(reuse_lambda=None), ["reuse_lambda = None", "[0, 1]"]),
     (dict(sigma="0.1"), ["sigma = '0.1'", ">= 0"]),
     (dict(lr=float("nan")), ["lr = nan", "finite"]),
-    (dict(seed=True), ["seed = True", "integer >= 0"]),
+    (dict(seed=True), ["seed = True", "an integer in [0, 4294967295]"]),
+    (dict(seed=2**32), ["seed = 4294967296", "an integer in [0, 4294967295]", "would replay seed 0"]),
+    (dict(seed=-1), ["seed = -1", "an integer in [0, 4294967295]"]),
     (dict(networks=0), ["networks = 0", "None or one of ['agent', 'type', 'one']"]),
     (dict(networks="team"), ["networks = 'team'", "None or one of ['agent', 'type', 'one']"]),
     (dict(algo="mappo", update_by="seat"), ["update_by = 'seat'", "'net' with algo 'mappo'"]),
@@ -430,25 +472,118 @@ def test_a_full_disk_is_one_line(tmp_path, capsys):
 # ---------------------------------------------------------------- issue 34: an interrupt stops the work
 
 
-@pytest.mark.parametrize("sig, to_group", [(signal.SIGINT, True), (signal.SIGTERM, False)],
-                         ids=["ctrl-c to the process group", "sigterm to the driver"])
-def test_an_interrupted_reproduce_cancels_queued_runs_and_says_how_to_resume(tmp_path, sig, to_group):
+def _children(pid: int) -> dict[int, int]:
+    """Every live process under ``pid`` (children, grandchildren, ...) and its parent, from /proc."""
+    parents = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended while we looked
+            continue
+        if fields[0] != "Z":
+            parents[int(stat.parent.name)] = int(fields[1])
+    found, frontier = {}, [pid]
+    while frontier:
+        parent = frontier.pop()
+        for child, its_parent in parents.items():
+            if its_parent == parent and child not in found:
+                found[child] = parent
+                frontier.append(child)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _outliving(pids, sent: float) -> list[int]:
+    """The processes of ``pids`` still alive ``STOP_LIMIT_S`` after the signal was sent."""
+    while time.time() < sent + STOP_LIMIT_S and [pid for pid in pids if _alive(pid)]:
+        time.sleep(0.1)
+    return [pid for pid in pids if _alive(pid)]
+
+
+def _kill(*pids: int) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+# Runs of 1M MuJoCo steps (App. A at the cpu budget, minutes each): a driver that waited for its
+# runs, or let a queued one start, would be caught. A healthy stop kills the workers at once; the
+# limits below leave a slow, loaded machine ten times what that needs.
+STOP_LIMIT_S = 15
+
+
+@pytest.mark.parametrize("signals, to_group", [((signal.SIGINT,), True), ((signal.SIGTERM,), False),
+                                               ((signal.SIGINT, signal.SIGINT), True)],
+                         ids=["ctrl-c to the process group", "sigterm to the driver", "ctrl-c twice"])
+def test_an_interrupted_reproduce_kills_its_workers_at_once_and_starts_no_queued_run(tmp_path, signals, to_group):
     env = {**os.environ, "OAPO_FIGURES": str(tmp_path)}
-    driver = subprocess.Popen([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", "paper", "--figures",
-                               "fig3b", "--skip-notebooks", "--workers", "2", "--check"],
+    driver = subprocess.Popen([sys.executable, "-m", "oapo_lite", "reproduce", "--budget", "cpu", "--figures",
+                               "figA_mamujoco", "--skip-notebooks", "--workers", "2", "--check"],
                               env=env, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                               text=True)
     started = tmp_path / "data" / "checkpoints"
-    deadline = time.time() + 120
+    deadline = time.time() + 300
     while time.time() < deadline and not (started.exists() and len(list(started.iterdir())) >= 2):
         time.sleep(0.2)
     time.sleep(2)  # both workers are training
-    (os.killpg if to_group else os.kill)(driver.pid, sig)
-    sent = time.time()
-    _, err = driver.communicate(timeout=60)
-    assert driver.returncode == 130 and time.time() - sent < 30, err
+    workers = _children(driver.pid)
+    try:
+        assert len([p for p, parent in workers.items() if parent == driver.pid]) >= 2, workers
+        for i, sig in enumerate(signals):
+            (os.killpg if to_group else os.kill)(driver.pid, sig)
+            sent = sent if i else time.time()
+            time.sleep(0.05)
+        _, err = driver.communicate(timeout=4 * STOP_LIMIT_S)
+        assert driver.returncode == 130 and time.time() - sent < STOP_LIMIT_S, err
+        assert not _outliving(workers, sent)  # no worker, nor anything it started
+    finally:  # a failed stop leaves nothing running either
+        _kill(driver.pid, *workers)
     assert "run the same command again to resume" in err and "Traceback" not in err
-    assert len(list(started.iterdir())) <= 3 < len(grid.runs_of("fig3b", "paper"))  # the queue never started
+    assert len(list(started.iterdir())) == 2  # no queued run started
+
+
+def _sleep_with_a_child(seconds: float) -> None:
+    """A job that runs ``seconds`` in a child process it starts, as a notebook runs in its kernel."""
+    subprocess.run([sys.executable, "-c", f"import time; time.sleep({seconds})"], check=True)
+
+
+def _sleeping_driver(out: Path) -> None:
+    from oapo_lite.study.executors import in_processes
+
+    jobs = [(k, (60.0,)) for k in range(5)]
+    for _ in in_processes(_sleep_with_a_child, jobs, workers=2):
+        out.write_text("a job finished")
+
+
+def test_stopping_the_process_pool_kills_what_its_jobs_started_and_starts_no_queued_job(tmp_path):
+    """The notebook stage's pool: a job's own children (a kernel) die with it."""
+    script = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import signal; "
+              "signal.signal(signal.SIGTERM, signal.default_int_handler); "
+              f"from test_bad_input_and_damage import _sleeping_driver; from pathlib import Path; "
+              f"_sleeping_driver(Path({str(tmp_path / 'finished')!r}))")
+    driver = subprocess.Popen([sys.executable, "-c", script], start_new_session=True, stderr=subprocess.PIPE,
+                              text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and sum(len(_children(w)) for w in _children(driver.pid)) < 2:
+        time.sleep(0.2)  # both workers have started their job's child
+    below = _children(driver.pid)
+    try:
+        assert len(below) >= 4, below  # two workers, a child each
+        os.kill(driver.pid, signal.SIGTERM)
+        sent = time.time()
+        _, err = driver.communicate(timeout=4 * STOP_LIMIT_S)
+        assert time.time() - sent < STOP_LIMIT_S and "KeyboardInterrupt" in err
+        assert not _outliving(below, sent) and not (tmp_path / "finished").exists()
+    finally:
+        _kill(driver.pid, *below)
 
 
 # ---------------------------------------------------------------- issue 34: notebooks and the library
@@ -486,8 +621,77 @@ def test_the_run_cache_refuses_another_configs_rows_and_text_in_a_number_column(
         experiments.read_run(one, "smoke")
     path = experiments.run_path(ten, "smoke")
     pd.read_csv(path).assign(eval_return="lots").to_csv(path, index=False)
-    with pytest.raises(store.DamagedFile, match=r"text where its \['eval_return'\] hold numbers"):
+    with pytest.raises(store.DamagedFile, match=r"its eval_return column at row 1 \(step 0\) holds 'lots'; allowed: "
+                                                r"a number \(finite\); empty only where no evaluation episode ended"):
         experiments.read_run(ten, "smoke")
+
+
+M_JSON = "[[0.7, 0.3], [0.3, 0.7]]"
+
+
+@pytest.mark.parametrize("column, damage, words", [
+    ("frac_opt", lambda v: v.where(v.index < len(v) - 4, np.nan), r"frac_opt column at row 8 \(step 1400\) is empty; allowed: a "
+                                                                   r"number \(a maze's evaluation episodes always end\)"),
+    ("frac_opt", lambda v: v.where(v.index != 3, np.inf), r"frac_opt column at row 4 \(step 600\) holds inf; "
+                                                          r"allowed: a number <= 1.00001"),
+    ("frac_opt", lambda v: v * 10, r"frac_opt column at row 3 \(step 400\) holds 2.0; allowed: a number <= 1"),
+    ("frac_opt", lambda v: v * 0.5, r"frac_opt column at row 2 .* allowed: eval_return / the maze's optimum = 0.1"),
+    ("eval_success", lambda v: v - 1, r"eval_success column at row 1 \(step 0\) holds -1.0; allowed: a number in "
+                                      r"\[0, 1\]"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[1]"), r"reuse_matrix column at row 3 .* allowed: a square matrix"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, '"text"'), r"reuse_matrix column at row 3 \(step 400\) holds "
+                                                               r"'text'; allowed: a square matrix"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[0.7, 0.4], [0.3, 0.7]]"), r"rows summing to 1"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]"),
+     r"the same number of seats in every matrix \(\[2, 3\] here\)"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[0.7, 0.3]"), r"a matrix that is not JSON"),
+    ("iteration", lambda v: v + 1, r"iteration column at row 1 \(step 0\) holds 1; allowed: step / .* = 0"),
+    ("peer_share", lambda v: v.where(v.index == 0, 1.5), r"peer_share column at row 2 .* holds 1.5; allowed: a "
+                                                        r"number in \[0, 1.00001\]"),
+    ("value_loss", lambda v: v.where(v.index != 3, np.nan), r"value_loss column at row 4 .* empty only at the "
+                                                           r"evaluation before the first iteration"),
+    ("extra", lambda v: 1.0, r"columns no results row holds: \['extra'\]"),
+])
+def test_a_run_file_with_a_value_out_of_its_columns_range_is_refused_naming_file_column_and_row(
+        tmp_path, monkeypatch, column, damage, words):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    cfg = TrainConfig(algo="oappo", **dict(SMALL, steps=2000))
+    n = len(cfg.eval_steps)
+    fakes.write_run(cfg, "smoke", lambda s: s / 2000, grid=1, value_loss=[np.nan] + [0.5] * (n - 1),
+                    peer_share=[np.nan] + [0.3] * (n - 1), reuse_matrix=[np.nan] + [M_JSON] * (n - 1))
+    experiments.read_run(cfg, "smoke")  # whole
+    path = experiments.run_path(cfg, "smoke")
+    df = pd.read_csv(path)
+    df[column] = damage(df[column]) if column in df else damage(None)
+    df.to_csv(path, index=False)
+    with pytest.raises(store.DamagedFile, match=f"run file {re.escape(str(path))} .*{words}"):
+        experiments.read_run(cfg, "smoke")
+    assert not experiments.on_disk(cfg, "smoke")  # so reproduce trains it again
+
+
+def test_an_engine_evaluation_may_be_empty_and_every_verdict_says_so():
+    runs = pd.DataFrame({"label": ["a"] * 8 + ["b"] * 8, "seed": ([0] * 4 + [1] * 4) * 2,
+                         "step": list(range(4)) * 4,
+                         "eval_success": [0, .5, .9, np.nan, 0, .5, .9, 1, 0, .1, .1, .1, 0, .1, .2, .1]})
+    rows = verdicts.per_run(runs, 0.5, tail=0.5, y="eval_success")
+    assert rows["gaps"].tolist() == [1, 0, 0, 0] and rows["final"].iloc[0] == 0.7  # the last 2 that hold a value
+    ev = verdicts.Evidence(runs, metric=verdicts.WIN_RATE)
+    v = verdicts.check(ev, verdicts.higher, ("a", "b"), "a ends above b")
+    assert v.reason.endswith("1 of a's evaluations hold no value (no evaluation episode ended) and are left out")
+    with pytest.raises(ValueError, match=r"curve 'a' has two rows for seed 0 at step 1"):
+        verdicts.per_run(pd.concat([runs, runs.iloc[[1]]]), y="eval_success")
+
+
+def test_a_checkpoint_whose_record_contradicts_itself_is_named_as_damaged(tmp_path):
+    cfg = TrainConfig(algo="happo", **SMALL)
+    train(cfg, tmp_path, progress=False)
+    ck = load_checkpoint(tmp_path)
+    for broken, words in (({**ck, "rows": []}, "evaluation rows are missing"),
+                          ({**ck, "history": ck["history"][:-1]}, "at iteration 2 but holds 1 history entries"),
+                          ({**ck, "rows": ck["rows"][::-1]}, r"rows are at iterations \[2, 1, 0\]")):
+        torch.save(broken, tmp_path / "checkpoint.pt")
+        with pytest.raises(store.DamagedFile, match=f"checkpoint {tmp_path}/checkpoint.pt is damaged: .*{words}"):
+            train(cfg, tmp_path, progress=False)
 
 
 def test_reading_results_never_writes(tmp_path, monkeypatch):
@@ -537,8 +741,8 @@ def test_no_command_and_a_folder_as_map_are_one_line(tmp_path, capsys):
     assert "is a folder" in _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path), "--env", str(tmp_path))
     board = tmp_path / "a_file"
     board.write_text("x")
-    assert "is not a folder" in _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path / "o"),
-                                           "--tensorboard", str(board))
+    assert "is a file; allowed: a folder" in _cli_error(capsys, "train", *QUICK, "--out", str(tmp_path / "o"),
+                                                        "--tensorboard", str(board))
 
 
 def test_an_unreadable_checkpoint_is_not_called_damaged(tmp_path, monkeypatch):
@@ -626,3 +830,61 @@ def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
 
     with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget 'nope'"):
         run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": "nope"})
+
+
+@pytest.mark.parametrize("command", ["train", "reproduce", "book"])
+def test_every_flag_says_what_it_means_its_default_and_what_it_allows(command):
+    from oapo_lite.neural.config import ALLOWED, MEANING
+    from oapo_lite.study import book, reproduce
+
+    parsers = {"train": cli.train_parser, "reproduce": reproduce.command_line, "book": book.command_line}
+    for action in parsers[command]()._actions:
+        if action.help == argparse.SUPPRESS or action.dest == "help":  # a renamed flag's error; -h itself
+            continue
+        assert action.help and re.fullmatch(r"\S.* \(default: [^;]+(; allowed: .+)?\)", action.help), (command, action.dest)
+        if action.nargs != 0:  # a flag with a value says what it allows
+            assert "; allowed: " in action.help, (command, action.dest)
+        if command == "train" and action.dest in MEANING:  # from the field's one home
+            assert action.help.startswith(MEANING[action.dest]) and (ALLOWED[action.dest] in action.help
+                                                                     or action.dest == "env")
+
+
+def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path, capsys, monkeypatch):
+    from oapo_lite.study import reproduce
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
+    (cfg,) = [cfg for _, cfg in grid.figure_runs("fig1", "smoke")]
+    lock = experiments.runs_dir("smoke") / "checkpoints" / experiments.run_id(cfg) / ".lock"
+    lock.mkdir(parents=True)
+    assert reproduce.main(["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]) == 1
+    err = capsys.readouterr().err
+    assert f"error: the lock file {lock} is a folder; delete it" in err and "Traceback" not in err
+    out = tmp_path / "runs"
+    quick = TrainConfig(n_envs=8, rollout_len=25, steps=400, eval_episodes=4)  # QUICK's run
+    (out / experiments.run_id(quick) / ".lock").mkdir(parents=True)
+    assert "is a folder; delete it" in _cli_error(capsys, "train", *QUICK, "--out", str(out))
+
+
+def test_the_tables_take_no_rows_and_name_what_they_lack():
+    from oapo_lite.study import claims
+
+    none = pd.DataFrame(columns=claims.GLANCE_COLUMNS)
+    assert claims.summary(none).empty and claims.summary_lines(none) == [] and claims.conclusion(none) == []
+    assert claims.readme_markdown(none).endswith("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for table in (claims.summary, claims.summary_lines, claims.conclusion, claims.readme_markdown):
+        with pytest.raises(ValueError, match=r"the claims lack the columns \['section', 'claim', 'verdict'\]"):
+            table(pd.DataFrame())
+    assert verdicts.reuse_table(pd.DataFrame(), "eval_success", {}).empty
+    with pytest.raises(ValueError, match=r"no runs labelled \['a', 'b'\] to pair; the runs' labels are \[\]"):
+        verdicts.paired_difference(pd.DataFrame(), "a", "b", "frac_opt")
+    one = pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": [1.0]})
+    with pytest.raises(ValueError, match=r"no runs of the curves \['nonexistent'\] to draw; the data's curves are "
+                                         r"\['a'\]"):
+        plotting.learning_curves(one, order=["nonexistent"])
+
+
+def test_a_map_header_after_its_grid_is_named():
+    from oapo_lite.envs.maps import MapError, parse_maze
+
+    with pytest.raises(MapError, match=r"has its 'agents' line after the grid; the header lines .* come first"):
+        parse_maze("start: 1,1\n###\n#*#\n###\nagents: red")

@@ -163,7 +163,10 @@ def parse_maze(text: str, name: str = "custom") -> Maze:
         if not line:
             continue
         key, sep, value = line.partition(":")
-        if sep and not grid and key.strip() in ("agents", "start"):
+        if sep and key.strip() in ("agents", "start"):
+            if grid:
+                raise MapError(f"map {name!r} has its {key.strip()!r} line after the grid; the header lines "
+                               "'agents: ...' and 'start: ...' come first")
             header[key.strip()] = value.split()
         else:
             grid.append(line)

@@ -52,8 +52,23 @@ def _is_real(x) -> bool:
     return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
 
 
+# The seeds every engine takes as they are, so that two seeds never give one engine's randomness:
+# SMAX's key is the seed's 32 bits, torch's generators take 64. The streams derived from a seed
+# (actions, evaluation episodes, a GRF copy's engine) are SeedSequence hashes of (seed, purpose).
+MAX_SEED = 2**32 - 1
+
 # fields renamed since runs were first recorded (old name -> new): the command line names the new one
 RENAMED = {"lam": "reuse_lambda"}
+
+
+def _field(default, meaning: str, allowed: str):
+    """A config field with its one line of meaning and its allowed values: the command line's
+    ``--help`` and the error for a bad value both read them from here."""
+    return dataclasses.field(default=default, metadata={"meaning": meaning, "allowed": allowed})
+
+
+POSITIVE, AT_LEAST_0, FRACTION = "a finite number > 0", "a finite number >= 0", "a number in [0, 1]"
+WHOLE, SWITCH = "an integer >= 1", "True or False"
 
 
 @dataclass
@@ -61,128 +76,130 @@ class TrainConfig:
     """Everything that determines a run (with the seed). Defaults follow HARL (PKU-MARL/HARL),
     except the smaller (64, 64) hidden layers and the batch shape (32 copies x 50 steps)."""
 
-    algo: str = "oappo"
-    env: str = "black_red"  # built-in map name or map text
-    env_fn: Callable | None = None  # PettingZoo ParallelEnv factory; replaces ``env`` when given
-    seed: int = 0
-    steps: int = 200_000  # total env steps (joint transitions over all copies)
-    n_envs: int = 32
-    rollout_len: int = 50
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    # V(final state) on truncation; None: yes, except on the built-in mazes, whose state holds
-    # t / max_steps, so the time limit is part of the MDP and its end is terminal
-    bootstrap_truncation: bool | None = None
-    lr: float = 5e-4
-    critic_lr: float = 5e-4
-    ppo_epochs: int = 5
-    n_minibatch: int = 1
-    clip: float = 0.2
-    entropy_coef: float = 0.01
-    max_grad_norm: float = 10.0
-    hidden: tuple[int, ...] = (64, 64)
-    sigma: float = 0.1  # Eq. 9's KL threshold
-    reuse_lambda: float = 0.7  # Eq. 9's lambda: the probability a learner keeps for its own experience
-    kl_reduce: str = "max"  # Eq. 9's statistic of the per-observation KL (reuse.KL_REDUCES)
-    reuse_mode: str = "weights"
-    allowed: object = None  # None, an (n, n) bool mask, or a scheme name NR / UR / RR / AR
-    # the actors' networks, issue 31's readings of the paper: "agent" one per seat, "type" one per
-    # kind of seat (the env's agent_types; Eq. 9 then gates reuse across kinds), "one" one for every
-    # seat; None: the algorithm's own (MAPPO one, the others one per seat)
-    networks: str | None = None
-    # None: Eq. 9 as written; "gradient" / "gradient_sign" / "gradient_test": Eq. 9's weights scaled
-    # online by the agreement of each source's surrogate gradient with the learner's own (adaptive.py)
-    reuse_adapt: str | None = None
-    # iterations at the start with M = I (no reuse) before Eq. 9 applies: the control for "is the
-    # reuse of the first iterations, while untrained nets look alike, harmful?" (issue 31)
-    reuse_warmup: int = 0
-    # "net": each network is updated once an iteration, on the mean of its seats' rows of M;
-    # "seat": seat by seat in a random order, each update on its own seat's row of M with the
-    # sequential factor, so a network shared by several seats moves once per seat (HARL's HAPPO
-    # with a shared actor); where every network has one seat the two are the same
-    update_by: str = "net"
-    # the entropy bonus weighted as the own seats' surrogate is (W[i, i] for a net of one seat;
-    # for several, the sum of their weights; 0 where "sample" mode drew another source), so that
-    # reuse does not raise the bonus against the learner's own experience. PPO only (TRPO has no bonus)
-    entropy_by_weight: bool = False
-    kl_threshold: float = 0.01  # TRPO delta
-    cg_iters: int = 10
-    cg_damping: float = 0.1
-    line_search_steps: int = 10
-    backtrack: float = 0.8
-    accept_ratio: float = 0.5
-    eval_every: int = 5  # iterations
-    eval_episodes: int = 32
-    max_steps: int = 50
-    checkpoint_every: int = 25  # iterations
+    algo: str = _field("oappo", "the algorithm", str(sorted(ALGOS)))
+    env: str = _field("black_red", "the environment: a built-in maze, a maze's text or a real engine's scenario",
+                      "a built-in map name, a map text or <engine>:<name>")
+    env_fn: Callable | None = _field(None, "a PettingZoo ParallelEnv factory; replaces env when given (Python only)",
+                                     "None or a callable that returns a PettingZoo ParallelEnv")
+    seed: int = _field(0, "the run's seed: networks, actions and environment copies",
+                       f"an integer in [0, {MAX_SEED}] (SMAX's JAX key holds 32 bits: seed 2**32 would replay seed 0)")
+    steps: int = _field(200_000, "total env steps (joint transitions over all copies)", WHOLE)
+    n_envs: int = _field(32, "environment copies stepped together", WHOLE)
+    rollout_len: int = _field(50, "steps of every copy per iteration (PPO / TRPO family)", WHOLE)
+    gamma: float = _field(0.99, "the discount factor", FRACTION)
+    gae_lambda: float = _field(0.95, "GAE's lambda", FRACTION)
+    bootstrap_truncation: bool | None = _field(
+        None, "add V(final state) to the return where the time limit cut an episode; None: yes, except on the built-in "
+              "mazes, whose state holds t / max_steps, so their time limit ends the episode", "None, True or False")
+    lr: float = _field(5e-4, "the actors' learning rate (PPO / TRPO family)", POSITIVE)
+    critic_lr: float = _field(5e-4, "the critic's learning rate (PPO / TRPO family)", POSITIVE)
+    ppo_epochs: int = _field(5, "passes over the batch per iteration (PPO / TRPO family)", WHOLE)
+    n_minibatch: int = _field(1, "minibatches per pass", "an integer >= 1 and <= n_envs * rollout_len")
+    clip: float = _field(0.2, "PPO's clip of the ratio (Eq. 8's epsilon)", POSITIVE)
+    entropy_coef: float = _field(0.01, "the weight of the entropy bonus", AT_LEAST_0)
+    max_grad_norm: float = _field(10.0, "gradients are clipped to this norm (PPO / TRPO family)", POSITIVE)
+    hidden: tuple[int, ...] = _field((64, 64), "the hidden layers' widths of every actor and the critic",
+                                     "a non-empty sequence of positive integers")
+    sigma: float = _field(0.1, "Eq. 9's KL threshold: a peer whose K exceeds it is not reused",
+                          "a number >= 0 (inf: no KL gate)")
+    reuse_lambda: float = _field(0.7, "Eq. 9's lambda: the weight a learner keeps for its own experience", FRACTION)
+    kl_reduce: str = _field("max", "Eq. 9's statistic of the per-observation KL", str(list(KL_REDUCES)))
+    reuse_mode: str = _field("weights", "weights: train on every source, weighted by M; sample: draw one source per "
+                                        "learner from M (Algorithm 1, lines 5-6)", "['sample', 'weights']")
+    allowed: object = _field(None, "which seats may reuse which (applied on top of Eq. 9's gate)",
+                             f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
+    networks: str | None = _field(
+        None, "the actors' networks: agent, one per seat; type, one per kind of seat (Eq. 9 then gates reuse across "
+              "kinds); one, one for every seat; None: the algorithm's own (MAPPO one, the others one per seat)",
+        f"None or one of {list(NETWORKS)}")
+    reuse_adapt: str | None = _field(
+        None, "None: Eq. 9 as written; else Eq. 9's weights scaled online by the agreement of each source's "
+              "surrogate gradient with the learner's own (oapo_lite/neural/adaptive.py)",
+        f"None or one of {list(adaptive.ADAPT_RULES)}")
+    reuse_warmup: int = _field(0, "iterations at the start with M = I (no reuse) before Eq. 9 applies",
+                               "an integer >= 0")
+    update_by: str = _field(
+        "net", "net: each network updated once an iteration on the mean of its seats' rows of M; seat: seat by "
+               "seat in a random order with the sequential factor (a shared network moves once per seat)",
+        "['net', 'seat']")
+    entropy_by_weight: bool = _field(
+        False, "weight the entropy bonus as the own seats' surrogate is, so that reuse does not raise it (PPO only)",
+        SWITCH)
+    kl_threshold: float = _field(0.01, "TRPO's delta: the KL bound of a trust-region step", POSITIVE)
+    cg_iters: int = _field(10, "TRPO's conjugate-gradient iterations", WHOLE)
+    cg_damping: float = _field(0.1, "TRPO's damping of the Fisher-vector product", AT_LEAST_0)
+    line_search_steps: int = _field(10, "TRPO's backtracking steps", WHOLE)
+    backtrack: float = _field(0.8, "TRPO's step shrink per backtracking step", "a number in (0, 1)")
+    accept_ratio: float = _field(0.5, "TRPO accepts a step whose improvement is this share of the expected one",
+                                 AT_LEAST_0)
+    eval_every: int = _field(5, "iterations between evaluations", WHOLE)
+    eval_episodes: int = _field(32, "evaluation episodes (one per evaluation copy)", WHOLE)
+    max_steps: int = _field(50, "an episode's time limit in env steps", WHOLE)
+    checkpoint_every: int = _field(25, "iterations between checkpoints", WHOLE)
     # SEAC and SePS train with A2C at their reference code's defaults (ASSUMPTIONS.md); the PPO / TRPO fields
     # above (rollout_len, lr, critic_lr, ppo_epochs, clip, max_grad_norm, ...) do not apply to them
-    n_step: int = 5  # their n-step returns, and so their rollout length
-    a2c_lr: float = 3e-4
-    a2c_adam_eps: float = 1e-3
-    a2c_max_grad_norm: float = 0.5
-    seac_lambda: float = 1.0  # weight of the other agents' importance-weighted terms
-    seps_clusters: int | None = None  # None: the best Davies-Bouldin index over 2..n-1
-    seps_pretrain_steps: int = 20_000  # env steps on one shared network before clustering; part of ``steps``
-    # Issue 22's SMAX settings (at defaults that keep every committed run as it was)
-    # lr, critic_lr (and a2c_lr) fall linearly over the run: iteration it (0-based) of N uses
-    # lr * (1 - it / N), as JaxMARL's ANNEAL_LR; after the last iteration the rate is 0
-    lr_anneal: bool = False
-    value_norm: bool = True  # the critic regresses on running-normalised targets (HARL's ValueNorm)
-    # a LayerNorm on the inputs of every actor and of the critic (HARL's use_feature_normalization,
-    # on in its tuned MaMuJoCo settings); the PPO / TRPO family only
-    feature_norm: bool = False
+    n_step: int = _field(5, "SEAC / SePS: their n-step returns, and so their rollout length", WHOLE)
+    a2c_lr: float = _field(3e-4, "SEAC / SePS: the learning rate", POSITIVE)
+    a2c_adam_eps: float = _field(1e-3, "SEAC / SePS: Adam's epsilon", POSITIVE)
+    a2c_max_grad_norm: float = _field(0.5, "SEAC / SePS: gradients are clipped to this norm", POSITIVE)
+    seac_lambda: float = _field(1.0, "SEAC: the weight of the other agents' importance-weighted terms", AT_LEAST_0)
+    seps_clusters: int | None = _field(None, "SePS: its groups; None: the best Davies-Bouldin index over 2..n-1",
+                                       "None or an integer >= 1")
+    seps_pretrain_steps: int = _field(20_000, "SePS: env steps on one shared network before clustering, part of steps",
+                                      "an integer >= n_envs * n_step and < steps")
+    # the SMAX settings (at defaults that keep every committed run as it was)
+    lr_anneal: bool = _field(False, "every learning rate falls linearly to 0 over the run (JaxMARL's ANNEAL_LR)",
+                             SWITCH)
+    value_norm: bool = _field(True, "the critic regresses on running-normalised targets (HARL's ValueNorm)", SWITCH)
+    feature_norm: bool = _field(
+        False, "a LayerNorm on the inputs of every actor and of the critic (HARL's use_feature_normalization; PPO / "
+               "TRPO family)", SWITCH)
 
     def __post_init__(self):
-        def need(ok: bool, name: str, allowed: str):
+        def need(ok: bool, name: str, allowed: str | None = None):
+            """Refuse the field's value unless ``ok``; ``allowed`` defaults to the field's own."""
             if not ok:
-                raise ValueError(f"{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}")
+                raise ValueError(f"{name} = {getattr(self, name)!r} is invalid; allowed: {allowed or ALLOWED[name]}")
 
-        def whole(name: str, low: int = 1):
-            need(_is_int(getattr(self, name)) and getattr(self, name) >= low, name, f"an integer >= {low}")
-
-        def real(name: str, ok: Callable[[float], bool], allowed: str, finite: bool = True):
+        def real(name: str, ok: Callable[[float], bool], finite: bool = True):
             x = getattr(self, name)
-            need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name, allowed)
+            need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name)
 
-        need(isinstance(self.algo, str) and self.algo in ALGOS, "algo", str(sorted(ALGOS)))
-        need(self.env_fn is None or callable(self.env_fn), "env_fn", "None or a callable that returns a PettingZoo "
-                                                                       "ParallelEnv")
+        need(isinstance(self.algo, str) and self.algo in ALGOS, "algo")
+        need(self.env_fn is None or callable(self.env_fn), "env_fn")
         if self.env_fn is None:
-            need(isinstance(self.env, str) and self.env.strip() != "", "env",
-                 "a built-in map name, a map text or <engine>:<name>")
+            need(isinstance(self.env, str) and self.env.strip() != "", "env")
             env_registry.check(self.env)  # raises naming the built-in maps or the engine's names
         need(isinstance(self.hidden, (tuple, list)) and len(self.hidden) > 0
-             and all(_is_int(h) and h > 0 for h in self.hidden), "hidden", "a non-empty sequence of positive integers")
+             and all(_is_int(h) and h > 0 for h in self.hidden), "hidden")
         self.hidden = tuple(int(h) for h in self.hidden)
         for name in ("steps", "n_envs", "rollout_len", "ppo_epochs", "n_minibatch", "cg_iters", "line_search_steps",
                      "eval_every", "eval_episodes", "max_steps", "checkpoint_every", "n_step", "seps_pretrain_steps"):
-            whole(name)
-        whole("seed", 0)
-        whole("reuse_warmup", 0)
+            need(_is_int(getattr(self, name)) and getattr(self, name) >= 1, name, WHOLE)
+        need(_is_int(self.seed) and 0 <= self.seed <= MAX_SEED, "seed")
+        need(_is_int(self.reuse_warmup) and self.reuse_warmup >= 0, "reuse_warmup")
         maze = env_registry.maze_of(self.env) if self.env_fn is None else None
         if maze is not None:
             check_fits(maze, self.max_steps)
         need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
-        need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch", "<= n_envs * rollout_len")
+        need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):
-            real(name, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]")
+            real(name, lambda x: 0.0 <= x <= 1.0)
         for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold", "a2c_lr", "a2c_adam_eps",
                      "a2c_max_grad_norm"):
-            real(name, lambda x: x > 0, "a finite number > 0")
+            real(name, lambda x: x > 0)
         for name in ("entropy_coef", "cg_damping", "accept_ratio", "seac_lambda"):
-            real(name, lambda x: x >= 0, "a finite number >= 0")
-        real("sigma", lambda x: x >= 0, "a number >= 0 (inf: no KL gate)", finite=False)
-        real("backtrack", lambda x: 0.0 < x < 1.0, "a number in (0, 1)")
-        need(self.kl_reduce in KL_REDUCES, "kl_reduce", str(list(KL_REDUCES)))
-        need(self.reuse_mode in ("weights", "sample"), "reuse_mode", "['sample', 'weights']")
+            real(name, lambda x: x >= 0)
+        real("sigma", lambda x: x >= 0, finite=False)
+        real("backtrack", lambda x: 0.0 < x < 1.0)
+        need(self.kl_reduce in KL_REDUCES, "kl_reduce")
+        need(self.reuse_mode in ("weights", "sample"), "reuse_mode")
         for name in ("lr_anneal", "value_norm", "entropy_by_weight", "feature_norm"):
-            need(isinstance(getattr(self, name), (bool, np.bool_)), name, "True or False")
+            need(isinstance(getattr(self, name), (bool, np.bool_)), name)
         need(self.bootstrap_truncation is None or isinstance(self.bootstrap_truncation, (bool, np.bool_)),
-             "bootstrap_truncation", "None, True or False")
-        need(self.networks is None or isinstance(self.networks, str) and self.networks in NETWORKS, "networks",
-             f"None or one of {list(NETWORKS)}")
-        need(self.update_by in ("net", "seat"), "update_by", "['net', 'seat']")
+             "bootstrap_truncation")
+        need(self.networks is None or isinstance(self.networks, str) and self.networks in NETWORKS, "networks")
+        need(self.update_by in ("net", "seat"), "update_by")
         if self.entropy_by_weight:
             ppo = sorted(a for a, s in ALGOS.items() if not (s.trust_region or s.a2c))
             need(not (ALGOS[self.algo].a2c or ALGOS[self.algo].trust_region) and self.entropy_coef > 0,
@@ -192,27 +209,25 @@ class TrainConfig:
             sequential = sorted(a for a in ALGOS if ALGOS[a].sequential)
             need(ALGOS[self.algo].sequential, "update_by", f"'net' with algo {self.algo!r}; updating seat by seat "
                                                            f"needs the sequential factor of {sequential}")
-        need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES, "reuse_adapt",
-             f"None or one of {list(adaptive.ADAPT_RULES)}")
+        need(self.reuse_adapt is None or isinstance(self.reuse_adapt, str) and self.reuse_adapt in adaptive.ADAPT_RULES,
+             "reuse_adapt")
         if self.reuse_adapt is not None:
             # the rule rescales Eq. 9's matrix between separate learners
             need(self.network_kind == "agent" and self.update_by == "net", "reuse_adapt",
                  "None unless every seat has its own network, updated once (networks='agent', update_by='net')")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
                  f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
-        mask = "None, an (n, n) bool mask or a scheme in " + str(list(SCHEMES))
         if isinstance(self.allowed, str):
-            need(self.allowed in SCHEMES, "allowed", mask)
+            need(self.allowed in SCHEMES, "allowed")
         elif self.allowed is not None:
             try:
                 allowed = np.asarray(self.allowed)
             except ValueError:  # ragged rows
                 allowed = None
             need(allowed is not None and allowed.ndim == 2 and allowed.shape[0] == allowed.shape[1]
-                 and np.isin(allowed, (0, 1)).all(), "allowed", mask)
+                 and np.isin(allowed, (0, 1)).all(), "allowed")
             self.allowed = allowed.astype(bool)
-        need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1),
-             "seps_clusters", "None or an integer >= 1")
+        need(self.seps_clusters is None or (_is_int(self.seps_clusters) and self.seps_clusters >= 1), "seps_clusters")
         if ALGOS[self.algo].a2c:
             need(not self.feature_norm, "feature_norm", f"False with algo {self.algo!r} (its A2C networks have none)")
             need(self.networks is None, "networks", f"None with algo {self.algo!r} (SEAC has one network per agent, "
@@ -275,3 +290,7 @@ class TrainConfig:
             d["env"] = self.env.strip().replace("\n", "/")  # a map text, on one CSV line
         return d
 
+
+
+ALLOWED = {f.name: f.metadata["allowed"] for f in dataclasses.fields(TrainConfig)}
+MEANING = {f.name: f.metadata["meaning"] for f in dataclasses.fields(TrainConfig)}

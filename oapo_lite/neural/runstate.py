@@ -146,7 +146,28 @@ def load_checkpoint(out_dir: str | Path) -> dict:
                           f"{START_AFRESH}") from None
     if not isinstance(ck, dict) or "config" not in ck:
         raise DamagedFile(f"checkpoint {path} is not an oapo_lite checkpoint; {START_AFRESH}")
+    why = _inconsistent(ck)
+    if why:
+        raise DamagedFile(f"checkpoint {path} is damaged: {why}; {START_AFRESH}")
     return ck
+
+
+def _inconsistent(ck: dict) -> str | None:
+    """What contradicts itself in a checkpoint's run record, or None: its iteration, one history
+    entry per iteration, and its evaluation rows (the first before training, in order, none past
+    the iteration)."""
+    it, history, rows = ck.get("iteration"), ck.get("history"), ck.get("rows")
+    if not isinstance(it, int) or isinstance(it, bool) or it < 0:
+        return f"its iteration is {it!r}, not an integer >= 0"
+    if not isinstance(history, list) or len(history) != it:
+        return f"it is at iteration {it} but holds {len(history) if isinstance(history, list) else history!r} " \
+               "history entries"
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) and "iteration" in r for r in rows):
+        return "its evaluation rows are missing or not a list of rows"
+    seen = [r["iteration"] for r in rows]
+    if seen[0] != 0 or any(b <= a for a, b in zip(seen, seen[1:])) or seen[-1] > it:
+        return f"its evaluation rows are at iterations {seen}, not from 0 upwards to at most {it}"
+    return None
 
 
 def learner_state_before(ck: dict) -> dict:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import errno
 import shutil
 import subprocess
 import sys
@@ -100,10 +101,11 @@ SOURCES_MARK = ".oapo-book-sources"  # marks <out>-src as the book's own, which 
 def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     """Write the Sphinx sources next to ``out`` and build the HTML site into ``out``; returns
     the site's index.html."""
-    out = Path(out).resolve()
+    out = cli.output_folder(str(out), "--out")
     src = out.parent / f"{out.name}-src"
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} is a file; allowed: a folder for the site")
+    if out.exists() and any(out.iterdir()) and not (out / ".buildinfo").exists():  # Sphinx's mark of its output
+        raise ValueError(f"--out {out} holds files the book did not write; allowed: an empty or new folder, or the "
+                         "book's own earlier build")
     if src.exists() and not (src / SOURCES_MARK).exists():  # never delete what the book did not write
         raise ValueError(f"{src} exists and was not written by the book (it writes its sources there); move it or "
                          "choose another --out")
@@ -119,16 +121,34 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     shutil.copytree(mathjax_dir(), src / "_static" / "mathjax")
     (src / "_static" / "favicon.svg").write_text(FAVICON)
     cmd = [sys.executable, "-m", "sphinx", "-b", "html", "-E", *(["-q"] if quiet else []), str(src), str(out)]
-    subprocess.run(cmd, check=True)
+    done = subprocess.run(cmd, stderr=subprocess.PIPE, text=True)
+    sys.stderr.write(done.stderr)
+    if done.returncode:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        if "No space left on device" in done.stderr:
+            raise OSError(errno.ENOSPC, f"Sphinx could not write the book ({last})", str(out))
+        raise ValueError(f"Sphinx failed to build the book into {out} (exit status {done.returncode}): {last}")
     return out / "index.html"
 
 
-def main(argv: list[str] | None = None) -> int:
+def command_line() -> cli.Parser:
+    """The command line of ``book``."""
     parser = cli.Parser(prog="python -m oapo_lite book", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default=str(ROOT / "build" / "book"), help="folder of the built site")
+    parser.add_argument("--out", default=str(ROOT / "build" / "book"),
+                        help=cli.flag_help("folder of the built site", "build/book",
+                                           "a new or empty folder, or the book's earlier build"))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = command_line()
     args = parser.parse_args(argv)
-    index = build(Path(args.out))
+    try:
+        out = cli.output_folder(args.out, "--out")
+    except ValueError as err:
+        parser.error(str(err))
+    index = build(out)
     print(f"book: {index}")
     return 0
 

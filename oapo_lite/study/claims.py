@@ -148,12 +148,25 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
                                                          f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
                          "notebook": fig.notebook, "verdict": NOT_RUN, "budget": budget_share(fig, env, budgets[0], 0),
                          "why": NO_RUN, "at 5 seeds": "-", "why at 5 seeds": "-"})
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=GLANCE_COLUMNS)
+
+
+GLANCE_COLUMNS = ["section", "claim", "notebook", "verdict", "budget", "why", "at 5 seeds", "why at 5 seeds"]
+
+
+def _check_glance(df: pd.DataFrame) -> None:
+    lacking = [c for c in ("section", "claim", "verdict") if c not in df] if isinstance(df, pd.DataFrame) else []
+    if not isinstance(df, pd.DataFrame) or lacking:
+        raise ValueError(f"the claims lack the columns {lacking}; they must be glance()'s rows, with columns "
+                         f"{GLANCE_COLUMNS}")
 
 
 def summary(df: pd.DataFrame) -> pd.DataFrame:
     """``glance`` counted: per section, how many claims have each status (a grouped row of
-    claims without runs counts each of its claims)."""
+    claims without runs counts each of its claims); no claims, no rows."""
+    _check_glance(df)
+    if df.empty:
+        return pd.DataFrame(columns=list(SHORT.values()), dtype=int)
     claims_in = df["claim"].where(df["verdict"] == NOT_RUN).str.extract(r": (\d+) claims? \(", expand=False).astype(float).fillna(1).astype(int)
     counts = pd.crosstab(df["section"], df["verdict"].map(SHORT), values=claims_in, aggfunc="sum").fillna(0).astype(int)
     return counts.reindex(columns=[c for c in SHORT.values() if c in counts.columns])
@@ -166,7 +179,7 @@ def summary_lines(df: pd.DataFrame) -> list[str]:
 
 
 def markdown(df: pd.DataFrame) -> str:
-    """``df`` as a GitHub markdown table (pipes in cells escaped)."""
+    """``df`` as a GitHub markdown table (pipes in cells escaped); no rows, the header alone."""
     cells = lambda row: "| " + " | ".join(str(x).replace("|", "\\|") for x in row) + " |"
     return "\n".join([cells(df.columns), cells(["---"] * len(df.columns)), *map(cells, df.itertuples(index=False))])
 
@@ -185,6 +198,7 @@ SECTIONS = {"6.1": "the mazes", "6.2": "SMAC on SMAX", "6.3": "Google Research F
 def conclusion(df: pd.DataFrame) -> list[str]:
     """What the reproduction found, one paragraph per section of ``glance``: each status with
     the claims that have it, in the table's words."""
+    _check_glance(df)
     out = []
     for section, part in df.groupby("section", sort=False):
         n = int(summary(part).to_numpy().sum())

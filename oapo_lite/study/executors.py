@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import pickle
 import re
 import signal
 import sys
@@ -16,10 +17,10 @@ import tempfile
 import threading
 import time
 import traceback
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing.connection import wait
 from pathlib import Path
 
-from oapo_lite.cli import resource_error
+from oapo_lite.cli import KNOWN, resource_error
 from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
 from oapo_lite.store import DamagedFile
@@ -28,10 +29,12 @@ PACKAGE = Path(__file__).resolve().parents[1]
 
 
 def train_job(cfg, checkpoints: str):
-    """Train one run; (rows, None), or (None, traceback) when it raises: a failed run is
-    reported by the driver while the others go on. A damaged checkpoint is named and the run
-    trained again from the start (the cache's runs are deterministic). Memory, disk or
-    permissions running out is (None, ``RESOURCE`` + one line): the driver then stops."""
+    """Train one run; (rows, None), or (None, why) when it raises: a failed run is reported by
+    the driver while the others go on, with one line where the error says what to do
+    (``cli.KNOWN``: a bad value, a file in the way), else its traceback (a bug). A damaged
+    checkpoint is named and the run trained again from the start (the cache's runs are
+    deterministic). Memory, disk or permissions running out is (None, ``RESOURCE`` + one line):
+    the driver then stops."""
     try:
         try:
             rows = train(cfg, checkpoints, progress=False)
@@ -40,7 +43,9 @@ def train_job(cfg, checkpoints: str):
             rows = train(cfg, checkpoints, resume=False, progress=False)
     except Exception as err:
         resource = resource_error(err)  # the machine's, not the run's: the driver stops every run
-        return None, RESOURCE + resource if resource else traceback.format_exc()
+        if resource:
+            return None, RESOURCE + resource
+        return None, f"error: {' '.join(str(err).split())}" if isinstance(err, KNOWN) else traceback.format_exc()
     return rows, None
 
 
@@ -55,49 +60,112 @@ def local(jobs, workers: int = 2, address: str | None = None):
         for run, checkpoints in jobs:
             yield (run, *train_job(run.cfg, checkpoints))
         return
+    for run, outcome, died in in_processes(train_job, [(run, (run.cfg, ck)) for run, ck in jobs], workers):
+        yield (run, *outcome) if died is None else (run, None, died)
+
+
+def in_processes(fn, jobs, workers: int):
+    """``fn(*args)`` for every ``(key, args)`` of ``jobs``, in up to ``workers`` spawned processes
+    that take one job at a time; yields ``(key, value, died)`` as jobs finish: the value and None,
+    or None and why the worker process died (killed, out of memory). What ``fn`` raises is raised
+    here.
+
+    The queue stays in this process and a worker is sent a job only when it is idle, so a job
+    that has not started never starts once the caller stops. However the caller stops (Ctrl-C,
+    SIGTERM made one, a raise, the generator closed), every worker and its children (a notebook's
+    kernel, an engine's processes) are killed at once: a run resumes from its last checkpoint,
+    so there is nothing to wait for.
+    """
     # spawned, not forked: a parent that has imported JAX (SMAX) or started torch's threads
     # cannot fork safely (JAX warns of deadlocks; a forked pool hung the test suite)
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
-                               initializer=pool_worker, initargs=(os.getpid(),))
+    context = mp.get_context("spawn")
+    queue, busy, idle = list(jobs)[::-1], {}, []  # busy: connection -> (process, key)
     try:
-        futures = {pool.submit(train_job, run.cfg, checkpoints): run for run, checkpoints in jobs}
-        for future in as_completed(futures):
-            try:
-                rows, error = future.result()
-            except Exception:  # the worker process itself died (killed, out of memory)
-                rows, error = None, traceback.format_exc()
-            yield futures[future], rows, error
-    except BaseException:  # an interrupt (or the caller stopped early): queued runs never start
-        stop(pool)
-        raise
+        while queue or busy:
+            while queue and len(busy) < workers:
+                process, conn = idle.pop() if idle else _start_worker(context)
+                key, args = queue.pop()
+                conn.send((fn, args))
+                busy[conn] = process, key
+            for conn in wait(list(busy)):
+                process, key = busy.pop(conn)
+                try:
+                    value, error = conn.recv()
+                except (EOFError, OSError):  # the worker died mid-job
+                    process.join(timeout=5)
+                    yield key, None, f"its worker process died (exit code {process.exitcode})"
+                    continue
+                if error is not None:
+                    raise error
+                idle.append((process, conn))
+                yield key, value, None
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        kill_workers([p for p, _ in busy.values()] + [p for p, _ in idle])
 
 
-def stop(pool: ProcessPoolExecutor) -> None:
-    """Cancel a pool's queued jobs and end its running workers at once (a run resumes from its
-    last checkpoint). Without this, leaving the pool waits for every queued run to finish."""
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in list((pool._processes or {}).values()):  # no public way to end running workers (3.11)
-        process.terminate()
+def _start_worker(context):
+    ours, theirs = context.Pipe()
+    process = context.Process(target=_serve, args=(theirs, os.getpid()), name="oapo-worker")
+    process.start()
+    theirs.close()  # only the worker holds its end: its death is then an end of file here
+    return process, ours
 
 
-def pool_worker(parent: int) -> None:
-    """Pool initializer: leave Ctrl-C to the driver, which gets it too and then cancels the
-    queue and ends this worker (a worker that took it would start the next queued run before
-    the driver could cancel it), and die with the parent."""
+def _serve(conn, parent: int) -> None:
+    """A worker: run the jobs ``conn`` sends, send back ``(value, None)`` or ``(None, error)``.
+
+    It takes its own process group, so that Ctrl-C at a terminal reaches only the driver (a worker
+    that took it could start its next job before the driver stops it) and the driver can kill the
+    worker with everything it started; and it dies with the driver."""
+    os.setpgid(0, 0)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(parent)
+    from tqdm import tqdm
+
+    # tqdm's default lock is a named semaphore; a killed worker would leave it to the driver's
+    # resource tracker, which warns of it. A worker's bars never cross processes.
+    tqdm.set_lock(threading.RLock())
+    while True:
+        try:
+            fn, args = conn.recv()
+        except EOFError:  # the driver is gone
+            return
+        try:
+            reply = fn(*args), None
+        except Exception as err:
+            try:
+                pickle.dumps(err)
+            except Exception:  # not every exception survives the trip back
+                err = RuntimeError(traceback.format_exc())
+            reply = None, err
+        conn.send(reply)
+
+
+def kill_workers(processes) -> None:
+    """Kill worker processes and their process groups now. A second Ctrl-C or SIGTERM waits until
+    this is done, then interrupts as usual: it never leaves a worker behind."""
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        for process in processes:
+            for kill in (os.killpg, os.kill):  # the group; the worker alone if it has none yet
+                try:
+                    kill(process.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        for process in processes:
+            process.join()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
 
 
 def die_with_parent(parent: int) -> None:
-    """Pool initializer: end this worker once its parent is gone. A driver killed with SIGKILL
-    cannot stop its pool, whose workers would otherwise finish their runs (minutes, ~400 MB
+    """End this worker, with its process group, once its parent is gone. A driver killed with
+    SIGKILL cannot stop its workers, which would otherwise finish their runs (minutes, ~400 MB
     each) for nobody."""
     def watch():
         while os.getppid() == parent:
             time.sleep(0.5)
-        os._exit(1)
+        os.killpg(0, signal.SIGKILL)
 
     threading.Thread(target=watch, daemon=True, name="die-with-parent").start()
 

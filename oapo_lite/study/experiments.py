@@ -10,6 +10,7 @@ row belongs to. What the runs are is the grid's (``grid.GRID``).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -20,8 +21,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from oapo_lite.cli import output_folder
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
+from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.store import DamagedFile, read_arrays, write_frame
 from oapo_lite.study import grid
@@ -35,8 +38,11 @@ def figures_dir(budget: str) -> Path:
 
     ``OAPO_FIGURES`` moves the whole tree elsewhere (the timing benchmark uses it so as not
     to touch the committed results); set but empty, it counts as unset (not the working folder).
+    A relative one is resolved against the working folder; a command resolves it once at its
+    start (``reproduce.main``), so that notebooks, which run in ``notebooks/``, read the same tree.
     """
-    root = Path(os.environ.get("OAPO_FIGURES") or ROOT / "figures")
+    moved = os.environ.get("OAPO_FIGURES")
+    root = output_folder(moved, "OAPO_FIGURES") if moved else ROOT / "figures"
     return root if budget in COMMITTED else root / budget
 
 
@@ -94,17 +100,53 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
     if differ:
         raise DamagedFile(f"run file {path} holds another run's rows: its {differ} column does not say "
                           f"{cfg.flat()[differ]!r}; {RETRAIN}")
-    text = [c for c in RESULTS if c in df and pd.to_numeric(df[c], errors="coerce").isna().ne(df[c].isna()).any()]
-    if text:
-        raise DamagedFile(f"run file {path} has text where its {text} hold numbers; {RETRAIN}")
     try:
-        return read_arrays(df, MATRICES)
+        df = read_arrays(df, MATRICES)
     except ValueError as err:  # not JSON
         raise DamagedFile(f"run file {path} has a matrix that is not JSON ({err}); {RETRAIN}") from None
+    try:
+        _check_iterations(df, cfg)
+        results.check(df, cfg.flat())
+        _check_levels(df, cfg)
+    except results.BadRows as err:
+        raise DamagedFile(f"run file {path} is damaged: {err}; {RETRAIN}") from None
+    return df
 
 
-MATRICES = ("kl_matrix", "reuse_matrix", "agreement")  # per-iteration matrices, arrays once read
-RESULTS = ("iteration", "step", "eval_return", "frac_opt", "eval_success", "train_return")
+MATRICES = ("kl_matrix", "reuse_matrix", "agreement", "kl_nearest")  # per-iteration arrays, JSON in the file
+
+
+def _check_iterations(df: pd.DataFrame, cfg: TrainConfig) -> None:
+    """Every row's iteration is its step's (``results.check`` reads it)."""
+    for i, (it, step) in enumerate(zip(df["iteration"], df["step"])):
+        if it * cfg.iteration_steps != step:
+            raise results.BadRows(f"its iteration column at row {i + 1} (step {step}) holds {it!r}; allowed: step / "
+                                  f"(n_envs x rollout length) = {step / cfg.iteration_steps:g}")
+
+
+def _check_levels(df: pd.DataFrame, cfg: TrainConfig) -> None:
+    """What a row's config fixes beyond ``results.check``: on a maze, whose episodes always end and
+    whose optimum the oracle knows, every evaluation has a return, a success rate and that
+    return's fraction of the optimum."""
+    maze = env_registry.maze_of(cfg.env) if cfg.env_fn is None else None
+    if maze is None:
+        return
+    optimum = _optimum(cfg.env)
+    for i, row in enumerate(df[["step", "eval_return", "frac_opt", "eval_success"]].itertuples(index=False)):
+        for name in ("eval_return", "frac_opt", "eval_success"):
+            if pd.isna(getattr(row, name)):
+                raise results.BadRows(f"its {name} column at row {i + 1} (step {row.step}) is empty; allowed: a "
+                                      "number (a maze's evaluation episodes always end)")
+        if not np.isclose(row.frac_opt * optimum, row.eval_return, rtol=1e-9, atol=1e-9):
+            raise results.BadRows(f"its frac_opt column at row {i + 1} (step {row.step}) holds {row.frac_opt!r}; "
+                                  f"allowed: eval_return / the maze's optimum = {row.eval_return / optimum!r}")
+
+
+@functools.cache
+def _optimum(env: str) -> float:
+    from oapo_lite.envs.oracle import optimal_return
+
+    return optimal_return(env_registry.maze_of(env))
 
 
 def _config_differs(df: pd.DataFrame, cfg: TrainConfig) -> str | None:

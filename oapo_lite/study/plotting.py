@@ -51,6 +51,9 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     if df.empty:  # e.g. load_figure(..., skip_missing=True) with nothing on disk
         return _no_runs(ax, title)
     order = order if order is not None else list(dict.fromkeys(df["label"]))
+    unknown = [label for label in order if label not in set(df["label"])]
+    if unknown:
+        raise ValueError(f"no runs of the curves {unknown} to draw; the data's curves are {list(dict.fromkeys(df['label']))}")
     seeds_of = {}
     for label in order:  # the bold medians first, every curve's seeds on top: no seed hides under another curve
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)

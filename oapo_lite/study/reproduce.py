@@ -123,30 +123,20 @@ def _timed_run(path: Path, out: Path, parameters: dict) -> float:
 
 def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[str, float]]:
     """Execute every numbered notebook, ``workers`` at a time (each in its own kernel; they
-    only read the finished runs); ``inplace`` overwrites the committed copies."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    from oapo_lite.study.executors import pool_worker, stop
+    only read the finished runs); ``inplace`` overwrites the committed copies. A failed notebook
+    or an interrupt stops the others at once (``executors.in_processes``)."""
+    from oapo_lite.study.executors import in_processes
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = notebook_paths(budget)
+    jobs = [(path, (path, out_dir / path.name, {"budget": budget} if takes_budget(path) else {})) for path in paths]
     timings = {}
-    # spawned, as the training pool, and no more workers than notebooks: a fork pool starts all
-    # of its workers at the first submit, each a copy of this process
-    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(paths))), mp_context=mp.get_context("spawn"),
-                             initializer=pool_worker, initargs=(os.getpid(),)) as pool:
-        futures = {pool.submit(_timed_run, path, out_dir / path.name,
-                               {"budget": budget} if takes_budget(path) else {}): path for path in paths}
-        try:
-            for i, future in enumerate(as_completed(futures), 1):
-                path = futures[future]
-                timings[path.name] = future.result()
-                print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {timings[path.name]:.1f} s", flush=True)
-        except BaseException:  # a failed notebook or an interrupt: the others are not waited for
-            stop(pool)
-            raise
+    for i, (path, seconds, died) in enumerate(in_processes(_timed_run, jobs, max(1, workers)), 1):
+        if died:
+            raise NotebookFailed(f"{path.name} failed: {died}; the executed notebook is {out_dir / path.name}")
+        timings[path.name] = seconds
+        print(f"[{i}/{len(paths)}] {path.name} (budget={budget}) {seconds:.1f} s", flush=True)
     return [(path.name, timings[path.name]) for path in paths]
 
 
@@ -166,29 +156,62 @@ def _check_writable(folder: Path) -> None:
         raise ValueError(f"cannot write results to {folder}{moved}: {why}; point OAPO_FIGURES at a folder you can write")
 
 
+def _check_committed_data(moved: Path, budget: str, figures) -> None:
+    """Refuse a moved figures tree that lacks committed results this command does not write:
+    the notebooks read them whatever the budget (the claims table, the 20-seed and engine runs
+    they quote), so they would fail after all the training."""
+    from oapo_lite.study import experiments
+
+    committed = ROOT / "figures"
+    if moved == committed:
+        return
+    written = {experiments.run_path(r.cfg, budget).relative_to(moved) for r in experiments.grid_runs(budget, figures)}
+    written |= {experiments.data_dir(budget).relative_to(moved) / f"{f}.csv" for f in figures}
+    missing = [p.relative_to(committed) for p in sorted((committed / "data").rglob("*"))
+               if p.is_file() and "checkpoints" not in p.parts and p.relative_to(committed) not in written
+               and not (moved / p.relative_to(committed)).exists()]
+    if missing:
+        raise ValueError(f"OAPO_FIGURES={str(moved)!r} lacks {len(missing)} of the committed result files the notebooks "
+                         f"read (first: {missing[0]}); copy them there (cp -r {committed}/. {moved}/) or train only "
+                         "(--skip-notebooks)")
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt
+
+
+def command_line() -> cli.Parser:
+    """The command line of ``reproduce``."""
+    parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
+    parser.add_argument("--budget", default="smoke", help=cli.flag_help("the runs' budget, and the notebooks'", "smoke",
+                                                                        str(sorted(grid.BUDGETS))))
+    parser.add_argument("--inplace", action="store_true",
+                        help=cli.flag_help("write the executed notebooks over notebooks/*.ipynb (to commit them)",
+                                           "into build/notebooks/<budget>/"))
+    parser.add_argument("--check", action="store_true",
+                        help=cli.flag_help("CI mode: a line per finished run instead of progress bars", "bars"))
+    parser.add_argument("--workers", type=_positive, default=2,
+                        help=cli.flag_help("parallel training processes (local executor), then notebooks", 2,
+                                           "an integer >= 1"))
+    parser.add_argument("--executor", default="local", choices=["local", "ray"],
+                        help=cli.flag_help("where runs are trained: this machine's processes, or a Ray cluster",
+                                           "local", "local or ray"))
+    parser.add_argument("--address", default=None,
+                        help=cli.flag_help("the Ray cluster: auto (the one running on this machine) or its head's "
+                                           "HOST:PORT", "a private cluster on this machine",
+                                           "auto, HOST:PORT or ray://HOST:PORT"))
+    parser.add_argument("--figures", nargs="+", default=list(grid.FIGURES), metavar="FIGURE",
+                        help=cli.flag_help("train only these figures' runs", "every figure",
+                                           f"one or more of {list(grid.FIGURES)}"))
+    parser.add_argument("--skip-notebooks", action="store_true",
+                        help=cli.flag_help("train the runs only", "then execute every notebook"))
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     from oapo_lite.study import experiments
 
-    parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
-    parser.add_argument("--budget", default="smoke", help=f"one of {sorted(grid.BUDGETS)}")
-    parser.add_argument("--inplace", action="store_true",
-                        help="write executed notebooks over notebooks/*.ipynb (to commit them)")
-    parser.add_argument("--check", action="store_true",
-                        help="CI mode: no progress bars")
-    parser.add_argument("--workers", type=_positive, default=2,
-                        help="parallel training processes (local executor), then notebooks")
-    parser.add_argument("--executor", default="local", choices=["local", "ray"],
-                        help="where runs are trained: this machine's processes, or a Ray cluster")
-    parser.add_argument("--address", default=None,
-                        help="Ray cluster: auto (the one running on this machine) or HOST:PORT of its head; "
-                             "default: start a private one on this machine")
-    parser.add_argument("--figures", nargs="+", default=list(grid.FIGURES), metavar="FIGURE",
-                        help=f"train only these figures' runs; one or more of {list(grid.FIGURES)}")
-    parser.add_argument("--skip-notebooks", action="store_true", help="train the runs only")
+    parser = command_line()
     args = parser.parse_args(argv)
     try:  # fail fast, naming what is allowed
         grid.get_budget(args.budget)
@@ -202,6 +225,10 @@ def main(argv: list[str] | None = None) -> int:
             from oapo_lite.study.executors import check_address
 
             check_address(args.address)
+        if os.environ.get("OAPO_FIGURES"):  # resolved once: the notebooks run in notebooks/, the workers anywhere
+            os.environ["OAPO_FIGURES"] = str(cli.output_folder(os.environ["OAPO_FIGURES"], "OAPO_FIGURES"))
+            if not args.skip_notebooks:
+                _check_committed_data(experiments.figures_dir(grid.COMMITTED[0]), args.budget, args.figures)
         _check_writable(experiments.data_dir(args.budget))
     except ValueError as err:
         parser.error(str(err))
@@ -224,6 +251,10 @@ def main(argv: list[str] | None = None) -> int:
     except NotebookFailed as err:
         print(f"\nerror: {err}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("\ninterrupted while executing the notebooks: every run is on disk and the notebooks stopped; run "
+              "the same command again to resume (the notebooks are executed again)", file=sys.stderr)
+        return 130
     print("\nSummary")
     print(f"  experiment runs ({args.executor}): {runs.done} trained, {runs.cached} already on disk, "
           f"{len(runs.failed)} failed")

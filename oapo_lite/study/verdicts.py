@@ -65,7 +65,9 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     """One row per run: steps to threshold (censored), whether it got there, final value of
     ``y`` over the last ``tail`` of its evaluation points (column ``final``: a fraction of the
     optimum, a win rate or a return, as ``y`` is), its initial value (its first ``INITIAL``), its
-    peak, and its largest drop below an earlier peak."""
+    peak, its largest drop below an earlier peak, and its ``gaps``: evaluations whose ``y`` is
+    empty (an engine's evaluation in which no episode ended), which every number leaves out and
+    ``check`` names beside its verdict."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     rows = []
@@ -75,9 +77,15 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     if lacking:
         raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step and {y!r} "
                          "(e.g. experiments.load_figure's rows)")
+    twice = df[df.duplicated(["label", "seed", "step"])]
+    if len(twice):
+        first = twice.iloc[0]
+        raise ValueError(f"curve {first['label']!r} has two rows for seed {first['seed']} at step {first['step']}; "
+                         "a run has one row per evaluation (two runs with one seed under one label?)")
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
         k, k0 = max(1, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))
+        held = run[y].dropna()  # the windows hold k and k0 evaluations with a value
         steps, shares = _peer_shares(run)
         learning = steps <= (hit.iloc[0] if len(hit) else np.inf)
         rows.append({
@@ -85,18 +93,19 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
             "seed": seed,
             "steps_to_threshold": float(hit.iloc[0]) if len(hit) else float(run["step"].max()),
             "reached": bool(len(hit)),
-            "initial": float(run[y].iloc[:k0].mean()),
-            "final": float(run[y].iloc[-k:].mean()),
+            "initial": float(held.iloc[:k0].mean()),
+            "final": float(held.iloc[-k:].mean()),
             "peak": float(run[y].max()),
             "drawdown": float((run[y].cummax() - run[y]).max()),
             "reusing": float(np.mean(shares[learning] > 0)) if learning.any() else np.nan,
             "last_reuse_step": float(steps[shares > 0].max()) if (shares > 0).any() else np.nan,
+            "gaps": int(run[y].isna().sum()),
         })
     return pd.DataFrame(rows, columns=PER_RUN_COLUMNS)  # the columns even for a frame with no run
 
 
 PER_RUN_COLUMNS = ["label", "seed", "steps_to_threshold", "reached", "initial", "final", "peak", "drawdown", "reusing",
-                   "last_reuse_step"]
+                   "last_reuse_step", "gaps"]
 
 
 def _peer_shares(run: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -150,6 +159,8 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     mean over the last ``tail`` of its evaluation points, as mean and standard deviation over
     seeds. Runs without a reuse matrix (SEAC, SePS) have no row."""
     parts = []
+    if "reuse_matrix" not in df:  # no run recorded M (or no run at all)
+        return pd.DataFrame()
     for env, part in df[df["reuse_matrix"].notna()].groupby("env", sort=False):
         final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
         across = pd.Series([peer_share(m, owners[env, label]) for m, label in zip(part["reuse_matrix"], part["label"])],
@@ -195,6 +206,7 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
         "gain_se": gain.std(ddof=1) / np.sqrt(gain.size()),  # NaN with one seed
         "reusing": g["reusing"].mean(),  # NaN where no run recorded M
         "last_reuse_step": g["last_reuse_step"].max(),
+        "gaps": g["gaps"].sum(),
     })
 
 
@@ -211,6 +223,10 @@ def paired_difference(df: pd.DataFrame, a, b, y: str, tail: float = 0.2) -> tupl
     ``y`` over the last ``tail`` of their evaluation points) and a - b, with the mean difference
     and its bootstrap interval over the seeds that have both runs. The pairs are resampled
     whole, since one seed gives both runs the same initial networks and environments."""
+    absent = [x for x in (a, b) if not len(df) or x not in set(df["label"])]
+    if absent:
+        known = list(dict.fromkeys(df["label"])) if "label" in df else []
+        raise ValueError(f"no runs labelled {absent} to pair; the runs' labels are {known}")
     runs = per_run(df[df["label"].isin([a, b])], tail=tail, y=y).pivot(index="seed", columns="label", values="final")
     runs = runs.reindex(columns=[a, b]).dropna()
     runs["difference"] = runs[a] - runs[b]
@@ -476,7 +492,12 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     if why:
         return Verdict(claim, NOT_TESTABLE, "", "", why)
     verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
-    return replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
+    verdict = replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
+    gaps = [f"{int(ev.summary.loc[x, 'gaps'])} of {x}'s" for x in labels if ev.summary.loc[x, "gaps"]]
+    if gaps:  # (``per_run``) never silently: an evaluation without a value is left out of its run's numbers
+        verdict = replace(verdict, reason=f"{verdict.reason}; {' and '.join(gaps)} evaluations hold no value (no "
+                                          "evaluation episode ended) and are left out")
+    return verdict
 
 
 def claim_table(verdicts_by_budget: dict[str, list[Verdict]]) -> pd.DataFrame:

@@ -1,0 +1,138 @@
+"""What a run's results rows hold (``results.csv``, and the run cache's copy): every column
+beyond the config's, what it means, its type and range and when it may be empty; ``check``
+refuses rows that break one, naming the column and the row.
+
+A cell is empty (NaN) only where ``Column.empty`` says when. Matrices are n x n, with n the
+run's seats, and vectors have n entries; the same n in every row of a file.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+ROUNDING = 1e-5  # matrices are stored to 6 decimals, so a row of M sums to 1 within n * 5e-7
+
+
+@dataclass(frozen=True)
+class Column:
+    meaning: str
+    low: float = -math.inf
+    high: float = math.inf
+    integer: bool = False
+    empty: str = ""  # when the cell may be empty; "" never. ``FIRST``: at the evaluation before training only
+    shape: str = "number"  # "number", "matrix" (n x n), "vector" (n entries) or "text"
+    infinite: bool = False  # +inf allowed (a KL against a policy that gives an action no probability)
+    rows_sum_to_one: bool = False
+
+
+FIRST = "at the evaluation before the first iteration"
+NO_EPISODE = "where no evaluation episode ended (a real engine)"
+
+COLUMNS = {
+    "iteration": Column("iterations trained before this evaluation", 0, integer=True),
+    "step": Column("env steps trained before this evaluation", 0, integer=True),
+    "eval_return": Column("mean team return of the evaluation episodes (each copy's first)", empty=NO_EPISODE),
+    "frac_opt": Column("eval_return as a fraction of the maze's optimal team return", high=1 + ROUNDING,
+                       empty="where the env has no oracle (a real engine)"),
+    "eval_success": Column("share of evaluation episodes that succeeded (a maze's goal, a SMAX win, a GRF goal)",
+                           0, 1, empty="where the env has no success rule (MaMuJoCo) or no evaluation episode ended"),
+    "train_return": Column("mean team return of the episodes that ended in the last iteration's rollout",
+                           empty=FIRST + ", or where no episode ended in that rollout"),
+    "objective": Column("the learners' mean surrogate objective", empty=FIRST),
+    "value_loss": Column("the critic's loss", 0, empty=FIRST),
+    "policy_loss": Column("SEAC / SePS: the actors' mean policy loss", empty=FIRST),
+    "entropy": Column("SEAC / SePS: the actors' mean policy entropy", empty=FIRST),
+    "seac_weight": Column("SEAC: the mean importance weight of other agents' samples", 0,
+                          empty="in a SePS run, or " + FIRST),
+    "trpo_kl": Column("OATRPO / HATRPO: the mean KL of the accepted steps", 0,
+                      empty="in a PPO-family run, " + FIRST + ", or where no step was accepted"),
+    "trpo_accepted": Column("OATRPO / HATRPO: how many learners' steps the line search accepted", 0, integer=True,
+                            empty=FIRST),
+    "kl_matrix": Column("Eq. 9's K[i, j]: the KL of seat i's policy from seat j's on j's observations", 0,
+                        empty=FIRST, shape="matrix", infinite=True),
+    "reuse_matrix": Column("Eq. 9's M[i, j]: the weight learner i gives seat j's samples", 0, 1, empty=FIRST,
+                           shape="matrix", rows_sum_to_one=True),
+    "peer_share": Column("M's weight on other seats' samples, mean over learners", 0, 1 + ROUNDING, empty=FIRST),
+    "kl_nearest": Column("per seat, K to its nearest other seat", 0, empty=FIRST, shape="vector", infinite=True),
+    "iterations_reusing": Column("share of the iterations so far with some weight on another seat", 0, 1,
+                                 empty=FIRST),
+    "agreement": Column("adaptive reuse: each source's gradient agreement with the learner's own (inf: itself)",
+                        empty=FIRST, shape="matrix", infinite=True),
+    "seps_groups": Column("SePS: its groups of seats", empty="before its groups are chosen", shape="text"),
+}
+RETIRED = ("shared",)  # config fields since retired: older run files keep their columns, always empty
+
+
+class BadRows(ValueError):
+    """A results row breaks its column's declaration; the message names the column and the row."""
+
+
+def _fail(column: str, i: int, step, value, allowed: str) -> BadRows:
+    at = f"row {i + 1}" + ("" if step is None else f" (step {step})")
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    elif isinstance(value, np.generic):
+        value = value.item()
+    return BadRows(f"its {column} column at {at} holds {value!r}; allowed: {allowed}")
+
+
+def _allowed(c: Column) -> str:
+    kind = {"number": "an integer" if c.integer else "a number", "matrix": "a square matrix",
+            "vector": "a list of numbers", "text": "text"}[c.shape]
+    low, high = c.low > -math.inf, c.high < math.inf
+    bounds = ("" if c.shape == "text" else f" in [{c.low:g}, {c.high:.6g}]" if low and high
+              else f" >= {c.low:g}" if low else f" <= {c.high:.6g}" if high else " (finite)")
+    extra = (", rows summing to 1" if c.rows_sum_to_one else "") + (", +inf allowed" if c.infinite else "")
+    return kind + bounds + extra + (f"; empty only {c.empty}" if c.empty else "; never empty")
+
+
+def check(df: pd.DataFrame, config_columns) -> None:
+    """Raise ``BadRows`` naming the first cell of ``df`` (matrices already arrays) that breaks its
+    column's declaration, or a column that is neither declared nor one of ``config_columns``."""
+    unknown = [c for c in df.columns if c not in COLUMNS and c not in RETIRED and c not in config_columns
+               and c != "git_rev"]
+    if unknown:
+        raise BadRows(f"it has columns no results row holds: {unknown}")
+    kept = [c for c in RETIRED if c in df and df[c].notna().any()]
+    if kept:
+        raise BadRows(f"its retired {kept[0]} column holds values; allowed: empty")
+    steps = df["step"].tolist() if "step" in df else [None] * len(df)
+    first = (df["iteration"] == 0).to_numpy() if "iteration" in df else np.zeros(len(df), bool)
+    sizes = set()
+    for name, c in COLUMNS.items():
+        if name not in df:
+            continue
+        column = df[name]
+        empty = column.isna().to_numpy()
+        wrong = empty & ~(first if c.empty == FIRST else np.ones(len(df), bool) if c.empty else np.zeros(len(df), bool))
+        if c.shape == "number":
+            x = pd.to_numeric(column, errors="coerce").to_numpy(float)
+            with np.errstate(invalid="ignore"):
+                wrong |= ~empty & (np.isnan(x) | ~np.isfinite(x) | (x < c.low) | (x > c.high)
+                                   | (c.integer & (x != np.round(x))) | (column.map(type) == bool).to_numpy())
+        else:
+            for i in np.flatnonzero(~empty):
+                wrong[i] = not _fits(column.iloc[i], c, sizes)
+        if wrong.any():
+            i = int(np.flatnonzero(wrong)[0])
+            allowed = _allowed(c) if len(sizes) < 2 else f"the same number of seats in every matrix ({sorted(sizes)} here)"
+            raise _fail(name, i, steps[i], column.iloc[i], allowed)
+
+
+def _fits(value, c: Column, sizes: set) -> bool:
+    """Whether a matrix, vector or text cell fits ``c``; adds a matrix's or vector's size to ``sizes``."""
+    if c.shape == "text":
+        return isinstance(value, str)
+    try:
+        x = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    if x.ndim != (2 if c.shape == "matrix" else 1) or not x.size or (x.ndim == 2 and x.shape[0] != x.shape[1]):
+        return False
+    sizes.add(x.shape[0])
+    finite = np.isfinite(x) | (c.infinite & (x == np.inf))
+    return bool(finite.all() and (x >= c.low).all() and (x <= c.high).all() and len(sizes) == 1
+                and not (c.rows_sum_to_one and (np.abs(x.sum(axis=1) - 1) > ROUNDING).any()))
