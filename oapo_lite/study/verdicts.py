@@ -206,7 +206,6 @@ def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:
         "gain_se": gain.std(ddof=1) / np.sqrt(gain.size()),  # NaN with one seed
         "reusing": g["reusing"].mean(),  # NaN where no run recorded M
         "last_reuse_step": g["last_reuse_step"].max(),
-        "gaps": g["gaps"].sum(),
     })
 
 
@@ -493,7 +492,8 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
         return Verdict(claim, NOT_TESTABLE, "", "", why)
     verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
     verdict = replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
-    gaps = [f"{int(ev.summary.loc[x, 'gaps'])} of {x}'s" for x in labels if ev.summary.loc[x, "gaps"]]
+    gaps = ev.runs.groupby("label")["gaps"].sum()
+    gaps = [f"{int(gaps[x])} of {x}'s" for x in labels if gaps[x]]
     if gaps:  # (``per_run``) never silently: an evaluation without a value is left out of its run's numbers
         verdict = replace(verdict, reason=f"{verdict.reason}; {' and '.join(gaps)} evaluations hold no value (no "
                                           "evaluation episode ended) and are left out")
