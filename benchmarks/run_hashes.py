@@ -1,8 +1,8 @@
 """The check that a change moved no number: every algorithm trained for a few iterations on
 every engine (mazes, SMAX, multi-agent MuJoCo, GRF where it is installed), and the SHA-256 of
-each run's ``results.csv`` (all but its git revision) and of its checkpoint's tensors. Run it
-before and after a change that should not move a number (a refactor) and compare the two
-printouts line by line.
+each run's ``results.csv`` (all but its git revision and what it cost) and of its checkpoint's
+tensors. Run it before and after a change that should not move a number (a refactor) and
+compare the two printouts line by line.
 
     .venv/bin/python benchmarks/run_hashes.py [--envs black_red smax:3m ...]
 
@@ -21,6 +21,7 @@ import torch
 
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.results import COST
 from oapo_lite.neural.train import train
 from oapo_lite.study import grid
 
@@ -62,7 +63,8 @@ def run_hashes(algo: str, env: str, **reading) -> tuple[str, str]:
     with tempfile.TemporaryDirectory() as out:
         train(cfg, out, progress=False)
         rows = list(csv.reader((Path(out) / "results.csv").open()))
-        keep = [i for i, name in enumerate(rows[0]) if name != "git_rev"]  # the commit differs by design
+        # the commit and what the run cost differ by design
+        keep = [i for i, name in enumerate(rows[0]) if name != "git_rev" and name not in COST]
         results = hashlib.sha256(repr([[r[i] for i in keep] for r in rows]).encode()).hexdigest()[:16]
         ckpt = next(Path(out).rglob("*.pt"))
         return results, tensor_hash(torch.load(ckpt, weights_only=False))

@@ -165,3 +165,22 @@ def test_fig6b_budgets_are_data_and_every_run_has_its_own_id():
     assert {cfg.steps for _, cfg in paper if cfg.env == "grf:academy_counterattack_hard"} == {50_000_000}
     with pytest.raises(ValueError, match="unknown budget 'huge'"):
         grid.figure_runs("fig6b", "huge")
+
+
+@needs_grf
+def test_a_run_s_cost_counts_the_engine_s_worker_processes():
+    """GRF steps its copies in other processes: their CPU time is the run's too."""
+    import time
+
+    from oapo_lite.envs.vec import HasWorkers
+    from oapo_lite.neural.cost import cpu_seconds
+
+    env = grf.GRFVec(SCENARIO, 2, seed=0, max_steps=400, workers=2)
+    assert isinstance(env, HasWorkers) and len(env.worker_pids()) == 2
+    env.reset()
+    before, own = cpu_seconds([env]), time.process_time()
+    for _ in range(100):
+        env.step(np.zeros((2, env.n_agents), dtype=int))
+    assert cpu_seconds([env]) - before > 2 * (time.process_time() - own)  # the engines did the stepping
+    env.close()
+    assert env.worker_pids() == []

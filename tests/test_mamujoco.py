@@ -8,6 +8,7 @@ import torch
 from oapo_lite.envs import mamujoco, registry
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.results import learning
 from oapo_lite.neural.rollout import collect
 from oapo_lite.neural.runstate import load_checkpoint
 from oapo_lite.neural.train import train
@@ -110,7 +111,7 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path):
 
     fakes.interrupt(cfg, tmp_path / "resumed", at=3)
     assert load_checkpoint(tmp_path / "resumed")["iteration"] == 2
-    pd.testing.assert_frame_equal(full, train(cfg, tmp_path / "resumed", progress=False))
+    pd.testing.assert_frame_equal(learning(full), learning(train(cfg, tmp_path / "resumed", progress=False)))
 
 
 def test_reuse_on_a_heterogeneous_partition_raises_clearly(tmp_path):

@@ -14,6 +14,7 @@ from oapo_lite.neural import seps
 from oapo_lite.neural.a2c_family import A2C, nstep_returns, seac_loss
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.nets import Actors
+from oapo_lite.neural.results import learning
 from oapo_lite.neural.rollout import collect
 from oapo_lite.neural.runstate import load_checkpoint
 from oapo_lite.neural.train import train
@@ -251,7 +252,7 @@ def test_resuming_seac_and_seps_gives_the_uninterrupted_numbers(tmp_path, algo, 
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path / "resumed", progress=False, callback=crash)
     resumed = train(cfg, tmp_path / "resumed", progress=False)
-    cols = [c for c in full.columns if c != "git_rev"]
+    cols = [c for c in learning(full).columns if c != "git_rev"]
     assert full[cols].equals(resumed[cols])
     a, b = load_checkpoint(tmp_path / "full")["actors"], load_checkpoint(tmp_path / "resumed")["actors"]
     assert all(torch.equal(a[k], b[k]) for k in a)

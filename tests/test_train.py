@@ -22,6 +22,7 @@ from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural import seps
 from oapo_lite.neural.nets import Actors, Categorical
 from oapo_lite.neural.ppo_family import LearnerBatch, learner_dists, policy_distances, update_actors, update_units
+from oapo_lite.neural.results import learning
 from oapo_lite.neural.rollout import Inputs, Rollout, collect
 from oapo_lite.neural.runstate import load_checkpoint, load_history
 from oapo_lite.neural.train import train
@@ -57,8 +58,9 @@ def _same(a: dict, b: dict) -> bool:
 
 def _assert_same_run(tmp_path, a: str, rows_a: pd.DataFrame, b: str, rows_b: pd.DataFrame) -> None:
     """The same rows, returned and on disk, and the same final parameters."""
-    pd.testing.assert_frame_equal(rows_a, rows_b)
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / a / "results.csv"), pd.read_csv(tmp_path / b / "results.csv"))
+    pd.testing.assert_frame_equal(learning(rows_a), learning(rows_b))
+    pd.testing.assert_frame_equal(learning(pd.read_csv(tmp_path / a / "results.csv")),
+                                  learning(pd.read_csv(tmp_path / b / "results.csv")))
     assert _same(_params(tmp_path, a), _params(tmp_path, b))
 
 
@@ -98,7 +100,7 @@ def test_a_short_run_on_a_corridor_reaches_the_oracle_optimum(tmp_path, algo):
 def test_the_same_config_and_seed_give_identical_results(tmp_path):
     a = _run(tmp_path, "a", algo="oappo", **SMALL_BR)
     b = _run(tmp_path, "b", algo="oappo", **SMALL_BR)
-    pd.testing.assert_frame_equal(a, b)
+    pd.testing.assert_frame_equal(learning(a), learning(b))
     assert _same(_params(tmp_path, "a"), _params(tmp_path, "b"))
     c = _run(tmp_path, "c", algo="oappo", seed=1, **SMALL_BR)
     assert not _same(_params(tmp_path, "a"), _params(tmp_path, "c"))
@@ -176,7 +178,7 @@ def test_a_checkpoint_in_the_layout_before_issue_35_resumes_bit_for_bit(tmp_path
     _before_issue_35(ck)
     torch.save(ck, tmp_path / "before" / "checkpoint.pt")
     ends = [train(longer, tmp_path / name, progress=False) for name in ("now", "before")]
-    pd.testing.assert_frame_equal(*ends)
+    pd.testing.assert_frame_equal(*map(learning, ends))
     assert _same(_params(tmp_path, "now"), _params(tmp_path, "before"))
 
 
@@ -729,7 +731,7 @@ def test_tensorboard_scalars_are_the_history_and_change_no_number(tmp_path):
                       eval_episodes=4)
     plain = train(cfg, tmp_path / "plain", resume=False, progress=False)
     watched = train(cfg, tmp_path / "watched", resume=False, progress=False, tensorboard=tmp_path / "tb")
-    assert plain.drop(columns="git_rev").equals(watched.drop(columns="git_rev"))
+    assert learning(plain).drop(columns="git_rev").equals(learning(watched).drop(columns="git_rev"))
     events = EventAccumulator(str(tmp_path / "tb"))
     events.Reload()
     history = load_history(tmp_path / "watched")
@@ -738,3 +740,32 @@ def test_tensorboard_scalars_are_the_history_and_change_no_number(tmp_path):
                                 for h in history}, rel=1e-6)
     assert [e.step for e in events.Scalars("evaluation/frac_opt")] == watched["step"].tolist()
     assert {"peer share/red", "peer share/black", "critic/explained_variance"} <= set(events.Tags()["scalars"])
+    rate = {e.step: e.value for e in events.Scalars("time/steps_per_second")}
+    assert rate == pytest.approx({h["step"]: h["steps_per_s"] for h in history}, rel=1e-6)
+
+
+def test_every_row_and_iteration_records_what_the_run_has_cost_and_a_resume_adds_to_it(tmp_path):
+    from oapo_lite.neural.cost import machine
+
+    cfg = TrainConfig(algo="oappo", steps=160 * 8, checkpoint_every=2, **TINY)
+    full = train(cfg, tmp_path / "full", progress=False)
+    history = load_history(tmp_path / "full")
+    for frame in (full, pd.DataFrame(history)):
+        assert (frame["cpu_s"] > 0).all() and frame["cpu_s"].is_monotonic_increasing
+        assert (frame["wall_s"] > 0).all() and frame["wall_s"].is_monotonic_increasing
+    assert (full[["cpu_model", "cpu_count"]] == list(machine().values())).all().all()
+    assert all(h["steps_per_s"] > 0 for h in history)
+    # a resumed run adds to the sums it left in its checkpoint
+    fakes.interrupt(cfg, tmp_path / "resumed", at=3)
+    before = load_checkpoint(tmp_path / "resumed")["cost"]
+    resumed = train(cfg, tmp_path / "resumed", progress=False)
+    assert resumed["cpu_s"].iloc[-1] > before["cpu_s"] > 0 and resumed["wall_s"].iloc[-1] > before["wall_s"]
+    pd.testing.assert_frame_equal(learning(full), learning(resumed))
+    # a checkpoint written before costs were recorded: the rest of the run is unmeasured, not undercounted
+    fakes.interrupt(cfg, tmp_path / "old", at=3)
+    ck = load_checkpoint(tmp_path / "old")
+    del ck["cost"]
+    torch.save(ck, tmp_path / "old" / "checkpoint.pt")
+    old = train(cfg, tmp_path / "old", progress=False)
+    assert old["cpu_s"].iloc[:2].notna().all() and old["cpu_s"].iloc[2:].isna().all()
+    pd.testing.assert_frame_equal(learning(full), learning(old))

@@ -171,8 +171,7 @@ class GRFVec:
         self.n_envs, self.max_steps = check_copies(n_envs, max_steps)
         self.name, self.seed = name, int(seed)
         self.n_agents = SCENARIOS[name]
-        self.agents = tuple(f"player_{k}" for k in range(self.n_agents))
-        self.agent_types = self.agents  # HARL's players keep their own roles
+        self.agents = self.agent_types = agent_types(name)
         self.n_actions, self.obs_dim, self.state_dim = N_ACTIONS, OBS_DIM, self.n_agents * OBS_DIM
         self.continuous = False
         self.time_in_state, self.optimum = False, math.nan  # no clock in the state; no oracle
@@ -211,6 +210,10 @@ class GRFVec:
 
     def close(self) -> None:
         self._finalizer()
+
+    def worker_pids(self) -> list[int]:
+        """The processes that step the copies (a run's cost counts their CPU time)."""
+        return [p.pid for p in self._procs if p.is_alive()]
 
     def _static(self) -> tuple[np.ndarray, np.ndarray]:
         """(avail, active): every action is always legal and every player always acts."""
@@ -254,6 +257,13 @@ class GRFVec:
         if len(d) != len(self._parts):
             raise ValueError(f"state holds {len(d)} worker parts, this env has {len(self._parts)}")
         self._call("set_state", [(s,) for s in d])
+
+
+def agent_types(name: str) -> tuple[str, ...]:
+    """The kind of each seat of scenario ``name``, without starting an engine: HARL's players keep
+    their own roles, so each seat is its own kind (and named for it)."""
+    check(name)
+    return tuple(f"player_{k}" for k in range(SCENARIOS[name]))
 
 
 def make_vec(name: str, n_envs: int, seed: int, max_steps: int) -> GRFVec:

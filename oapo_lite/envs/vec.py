@@ -76,6 +76,14 @@ class StepsSomeCopies(Protocol):
 
 
 @runtime_checkable
+class HasWorkers(Protocol):
+    """Optional: an env that steps its copies in other processes (GRF) names them, so that a
+    run's CPU time counts theirs (``neural.cost``)."""
+
+    def worker_pids(self) -> list[int]: ...
+
+
+@runtime_checkable
 class HasSeatSpaces(Protocol):
     """Optional: an env whose seats may differ in their spaces (a PettingZoo env) names them, so
     that reuse between two seats can be refused where they differ (``reuse.check_spaces``)."""

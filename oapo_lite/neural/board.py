@@ -4,7 +4,8 @@ then ``tensorboard --logdir folder``). The optional ``tensorboard`` package writ
 
 Per iteration: each learner's approximate KL of its update, clip fraction and entropy (tags
 ``learner <net>/...``), the critic's explained variance, each seat's peer share (Eq. 9's
-weight on other seats' samples) and the training return; at every evaluation, the evaluation
+weight on other seats' samples), the training return and the env steps per second of the
+iteration (``time/steps_per_second``); at every evaluation, the evaluation
 return, fraction of the optimum and success rate. The x axis is env steps.
 """
 from __future__ import annotations
@@ -39,6 +40,7 @@ class Board:
         for agent, share in zip(self.agents, entry.get("peer_shares", [])):
             self._scalar(f"peer share/{agent}", share, step)
         self._scalar("train/return", entry.get("train_return"), step)
+        self._scalar("time/steps_per_second", entry.get("steps_per_s"), step)
 
     def evaluation(self, row: dict) -> None:
         """One results row."""

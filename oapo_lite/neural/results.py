@@ -30,6 +30,7 @@ class Column:
 
 FIRST = "at the evaluation before the first iteration"
 NO_EPISODE = "where no evaluation episode ended (a real engine)"
+UNMEASURED = "where the run was not measured (it resumed from a checkpoint written before costs were recorded)"
 
 COLUMNS = {
     "iteration": Column("iterations trained before this evaluation", 0, integer=True),
@@ -56,14 +57,27 @@ COLUMNS = {
     "reuse_matrix": Column("Eq. 9's M[i, j]: the weight learner i gives seat j's samples", 0, 1, empty=FIRST,
                            shape="matrix", rows_sum_to_one=True),
     "peer_share": Column("M's weight on other seats' samples, mean over learners", 0, 1 + ROUNDING, empty=FIRST),
+    "across_share": Column("M's weight on the seats of other networks, mean over seats: the reuse the gate decided",
+                           0, 1 + ROUNDING, empty=FIRST),
     "kl_nearest": Column("per seat, K to its nearest other seat", 0, empty=FIRST, shape="vector", infinite=True),
     "iterations_reusing": Column("share of the iterations so far with some weight on another seat", 0, 1,
                                  empty=FIRST),
     "agreement": Column("adaptive reuse: each source's gradient agreement with the learner's own (inf: itself)",
                         empty=FIRST, shape="matrix", infinite=True),
     "seps_groups": Column("SePS: its groups of seats", empty="before its groups are chosen", shape="text"),
+    "cpu_s": Column("CPU seconds the run has cost so far (every thread; an engine's worker processes)", 0,
+                    empty=UNMEASURED),
+    "wall_s": Column("wall seconds the run has taken so far", 0, empty=UNMEASURED),
+    "cpu_model": Column("the CPU the cost was measured on", empty=UNMEASURED, shape="text"),
+    "cpu_count": Column("its logical cores", 1, integer=True, empty=UNMEASURED),
 }
+COST = ("cpu_s", "wall_s", "cpu_model", "cpu_count")  # what a run cost: no number of its learning
 RETIRED = ("shared",)  # config fields since retired: older run files keep their columns, always empty
+
+
+def learning(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` less what the run cost (``COST``): what repeats bit for bit for one config and seed."""
+    return df.drop(columns=[c for c in COST if c in df])
 
 
 class BadRows(ValueError):

@@ -76,6 +76,9 @@ class RunState:
     iteration: int = 0
     history: list = field(default_factory=list)  # per-iteration metrics
     rows: list = field(default_factory=list)  # the evaluation rows: results.csv
+    # what the run has cost so far (``cost.Meter``); None: unmeasured (resumed from a checkpoint
+    # written before costs were recorded)
+    cost: dict | None = field(default_factory=lambda: {"cpu_s": 0.0, "wall_s": 0.0})
 
     @classmethod
     def start(cls, cfg: TrainConfig) -> "RunState":
@@ -97,7 +100,8 @@ class RunState:
     def state_dict(self) -> dict:
         return {"config": self.cfg.flat(), "iteration": self.iteration, "actors": self.actors.state_dict(),
                 "learner": self.learner.state_dict(), "act_gen": self.act_gen.get_state(), "torch_rng": torch.get_rng_state(),
-                "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows}
+                "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows,
+                "cost": self.cost}
 
     def load_state_dict(self, ck: dict) -> None:
         """Continue from checkpoint ``ck`` (``check_resumable`` first). A run extended to more
@@ -111,6 +115,7 @@ class RunState:
             torch.set_rng_state(ck["torch_rng"])
             self.env.set_state(ck["env"])
             self.iteration, self.step, self.history = ck["iteration"], ck["step"], ck["history"]
+            self.cost = ck.get("cost")  # absent: the run so far was not measured
         except KeyError as err:
             raise ValueError(f"checkpoint has no entry {err} (written by an older oapo_lite); {START_AFRESH}") from None
         config = self.cfg.flat()

@@ -25,6 +25,7 @@ import torch
 
 from oapo_lite.neural.board import Board
 from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.cost import Meter, clocks, machine
 from oapo_lite.neural.losses import Diverged
 from oapo_lite.neural.rollout import collect, episode_scores
 from oapo_lite.neural.runstate import RunState, derive_seed, git_revision, load_checkpoint, save_results
@@ -58,6 +59,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"train's {name} must be True or False, got {value!r}")
     out = Path(out_dir)
+    start = clocks()  # building the envs (a JAX compile, GRF's engines) is part of the run's cost
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # bit-reproducible, and two runs can share two cores
     lock = None
@@ -74,7 +76,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
         if not lock.acquire(wait=False):
             print(f"waiting for another process that is training {out}", file=sys.stderr, flush=True)
             lock.acquire()
-        return _train(state, out, resume, progress, callback, {} if timing is None else timing, tensorboard)
+            start = clocks()  # the wait is not the run's cost
+        return _train(state, out, resume, progress, callback, {} if timing is None else timing, tensorboard, start)
     finally:
         torch.set_num_threads(threads)
         if lock is not None:
@@ -113,6 +116,9 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
             **({"iterations_reusing": iterations_reusing(state.history)} if "peer_share" in metrics else {})}
 
 
+UNMEASURED = {"cpu_s": np.nan, "wall_s": np.nan, "cpu_model": np.nan, "cpu_count": np.nan}
+
+
 def iterations_reusing(history: list[dict]) -> float:
     """The share of the run's iterations so far in which some learner gave another agent's
     experience a positive weight (peer share > 0): how much of the run reuse operated in, read
@@ -121,7 +127,7 @@ def iterations_reusing(history: list[dict]) -> float:
 
 
 def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, clock: dict,
-           tensorboard: str | Path | None) -> pd.DataFrame:
+           tensorboard: str | Path | None, start: tuple[float, float]) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
     cfg, revision = state.cfg, git_revision()
@@ -130,10 +136,15 @@ def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, c
         save_results(state.rows, out)  # a results.csv deleted or damaged after the checkpoint comes back
     clock.update(env=0.0, policy=0.0, learn=0.0, eval=0.0)
     board = None if tensorboard is None else Board(tensorboard, state.env.agents)
+    meter = None if state.cost is None else Meter(state.cost, (state.env, state.eval_env), start)
+
+    def spent() -> dict:
+        """The run's cost so far, and where it was measured (NaN: unmeasured)."""
+        return {**meter.read(), **machine()} if meter is not None else UNMEASURED
 
     def evaluate_now(metrics: dict) -> None:
         tic = time.perf_counter()
-        state.rows.append(evaluation_row(state, metrics, revision))
+        state.rows.append({**evaluation_row(state, metrics, revision), **spent()})
         clock["eval"] += time.perf_counter() - tic
         if board is not None:
             board.evaluation(state.rows[-1])
@@ -141,12 +152,18 @@ def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, c
     try:
         if state.iteration == 0:
             evaluate_now({})
-        for _ in tqdm(range(state.iteration, cfg.n_iterations), initial=state.iteration, total=cfg.n_iterations,
-                      desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True):
+        bar = tqdm(range(state.iteration, cfg.n_iterations), initial=state.iteration, total=cfg.n_iterations,
+                   desc=f"{cfg.algo} seed {cfg.seed}", disable=None if progress else True)
+        for _ in bar:
+            tic = time.perf_counter()
             try:
                 metrics = iterate(state, clock)
             except Diverged as err:
                 raise _diverged_at(err, state, out) from None
+            # env steps per wall second of this iteration (SB3's time/fps, CleanRL's SPS)
+            rate = cfg.iteration_steps / max(time.perf_counter() - tic, 1e-9)
+            state.history[-1].update({"steps_per_s": rate, **{k: v for k, v in spent().items() if k.endswith("_s")}})
+            bar.set_postfix_str(f"{rate:,.0f} env steps/s", refresh=False)
             if cfg.evaluates(state.iteration):
                 evaluate_now(metrics)
             if state.iteration % cfg.checkpoint_every == 0 or state.iteration == cfg.n_iterations:

@@ -79,9 +79,24 @@ def run_path(cfg: TrainConfig, budget: str) -> Path:
 
 def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
     """A finished run's rows from the cache, checked against its config: every evaluation row
-    of the run, in order, with its seed and algorithm. A file that is not whole raises
-    ``DamagedFile`` naming it (``run_all`` then trains the run again)."""
+    of the run, in order, with its seed and algorithm, each value within its column's range
+    (``results.COLUMNS``). A file that is not whole raises ``DamagedFile`` naming it (``run_all``
+    then trains the run again). A file read before and unchanged since is not read again."""
     path = run_path(cfg, budget)
+    stat = path.stat()  # FileNotFoundError: not on disk
+    version = (path, stat.st_mtime_ns, stat.st_size)  # the path names the config
+    if version not in _CHECKED:
+        if len(_CHECKED) > 4096:
+            _CHECKED.clear()
+        _CHECKED[version] = _read_checked(path, cfg)
+    return _CHECKED[version].copy()
+
+
+_CHECKED: dict[tuple, pd.DataFrame] = {}  # run files already read and checked, by version
+
+
+def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
+    """``read_run``'s work."""
     try:
         df = pd.read_csv(path)
     except FileNotFoundError:

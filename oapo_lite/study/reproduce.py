@@ -176,6 +176,20 @@ def _check_committed_data(moved: Path, budget: str, figures) -> None:
                          "(--skip-notebooks)")
 
 
+def _cluster_cpus(address: str | None) -> int:
+    """The CPUs of the Ray cluster at ``address``; a private one would have this machine's."""
+    if address is None:
+        return os.cpu_count() or 1
+    from oapo_lite.study.executors import connect
+
+    ray, connected = connect(address)
+    try:
+        return int(ray.cluster_resources().get("CPU", 1))
+    finally:
+        if connected:
+            ray.shutdown()
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
@@ -205,6 +219,10 @@ def command_line() -> cli.Parser:
                                            f"one or more of {list(grid.FIGURES)}"))
     parser.add_argument("--skip-notebooks", action="store_true",
                         help=cli.flag_help("train the runs only", "then execute every notebook"))
+    parser.add_argument("--plan", action="store_true",
+                        help=cli.flag_help("print what the command would train and its estimated CPU and wall time "
+                                           "(per figure: runs, env steps, on disk, to train); train and write nothing",
+                                           "train"))
     return parser
 
 
@@ -225,6 +243,12 @@ def main(argv: list[str] | None = None) -> int:
             from oapo_lite.study.executors import check_address
 
             check_address(args.address)
+        if args.plan:
+            from oapo_lite.study import costs
+
+            workers = args.workers if args.executor == "local" else _cluster_cpus(args.address)
+            print(costs.main_plan(args.budget, args.figures, workers))
+            return 0
         if os.environ.get("OAPO_FIGURES"):  # resolved once: the notebooks run in notebooks/, the workers anywhere
             os.environ["OAPO_FIGURES"] = str(cli.output_folder(os.environ["OAPO_FIGURES"], "OAPO_FIGURES"))
             if not args.skip_notebooks:

@@ -1,0 +1,76 @@
+"""The committed cost table (``figures/data/costs.csv``) that ``reproduce --plan`` prices a run
+by where no finished run of its kind has a record: for every distinct cost key
+(``study.costs.cost_key``) among the runs of the given budgets, one run of that key trained for
+one evaluation period (``eval_every`` iterations and the evaluation that closes them), and its
+CPU and wall seconds per 1,000 env steps from its own record (``cpu_s``, ``wall_s``), less
+building the envs and the evaluation before training. Written atomically after every key, with
+the CPU it was measured on and the git revision, so an interrupted measurement resumes.
+
+    .venv/bin/python benchmarks/costs.py [--budgets cpu paper] [--again]
+
+``--again`` measures every key anew; otherwise keys already in the table are kept. Prints one
+line per key measured.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import tempfile
+import time
+
+import pandas as pd
+
+from oapo_lite.envs import registry
+from oapo_lite.neural.cost import machine
+from oapo_lite.neural.runstate import git_revision
+from oapo_lite.neural.train import train
+from oapo_lite.store import write_frame
+from oapo_lite.study import experiments, grid
+from oapo_lite.study.costs import COSTS, KEY, cost_key
+
+from loops import warm_up
+
+
+def measure(cfg) -> dict:
+    """One evaluation period of ``cfg`` (from seed 0's start): CPU and wall seconds per 1,000 env steps."""
+    short = dataclasses.replace(cfg, steps=cfg.eval_every * cfg.iteration_steps,
+                                **({"seps_pretrain_steps": min(cfg.seps_pretrain_steps, cfg.iteration_steps)}
+                                   if cfg.algo == "seps" else {}))
+    with tempfile.TemporaryDirectory() as out:
+        rows = train(short, out, progress=False)
+    first, last = rows.iloc[0], rows.iloc[-1]
+    steps = int(last["step"] - first["step"])
+    return {"cpu_per_kstep": 1000 * (last["cpu_s"] - first["cpu_s"]) / steps,
+            "wall_per_kstep": 1000 * (last["wall_s"] - first["wall_s"]) / steps, "measured_steps": steps}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--budgets", nargs="+", default=["cpu", "paper"])
+    parser.add_argument("--again", action="store_true", help="measure every key anew")
+    args = parser.parse_args()
+    old = pd.read_csv(COSTS, dtype=str, keep_default_na=False) if COSTS.exists() and not args.again else pd.DataFrame(columns=list(KEY))
+    done = {tuple(r[k] for k in KEY) for _, r in old.iterrows()}
+    todo = {}
+    for budget in args.budgets:
+        for run in experiments.grid_runs(budget):
+            key = cost_key(run.cfg)
+            engine = registry.split(run.cfg.env)[0]
+            if key not in done and key not in todo and not (engine and registry.missing_engine(engine)):
+                todo[key] = run.cfg
+    warm_up()
+    rows = [old]
+    for k, (key, cfg) in enumerate(todo.items(), 1):
+        tic = time.perf_counter()
+        price = measure(cfg)
+        rows.append(pd.DataFrame([{**dict(zip(KEY, key)), **price, **machine(), "git_rev": git_revision()[:12]}]))
+        write_frame(pd.concat(rows, ignore_index=True), COSTS)
+        print(f"[{k}/{len(todo)}] {' '.join(key[:4])} {key[6]}x{key[7]}: {price['cpu_per_kstep']:.3f} CPU-s per "
+              f"1,000 steps ({time.perf_counter() - tic:.0f} s)", flush=True)
+    print(f"{COSTS}: {sum(len(r) for r in rows)} keys")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

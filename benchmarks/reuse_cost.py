@@ -1,0 +1,76 @@
+"""What OAPPO's reuse costs against HAPPO's, side by side in one process, on 2s3z (Fig. 4's
+settings) and HalfCheetah 2x3 (App. A's): CPU seconds per 1,000 env steps of the whole loop and
+of its learning, their ratio to HAPPO's, and the sources a learner trains on (samples of seats
+with a positive weight in M, per learner and iteration: HAPPO 1).
+
+In Eq. 8's weights mode a learner evaluates and differentiates its network on the samples of
+every source it reuses, so its learning grows with that count; the "sample" reading (Algorithm
+1's lines 5-6: one source drawn from M per learner and iteration) trains on one seat's samples,
+as HAPPO does. HAPPO is measured first and last, so that drift on a shared machine shows.
+
+    .venv/bin/python benchmarks/reuse_cost.py [--envs smax:2s3z mamujoco:HalfCheetah-2x3] [--periods 1]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+
+import numpy as np
+
+from oapo_lite.neural.runstate import load_history
+from oapo_lite.neural.train import train
+from oapo_lite.study import grid
+
+from loops import cut_short, warm_up
+
+FIGURE = {"smax:2s3z": "fig4_smax", "mamujoco:HalfCheetah-2x3": "figA_mamujoco"}
+READINGS = {  # label of the figure's curve, and what changes from it
+    "happo": ("happo", {}),
+    "oappo a net per agent": ("oappo", {}),
+    "oappo a net per kind": ("oappo type", {}),
+    "oappo one net, seat by seat": ("oappo one seat", {}),
+    "oappo a net per agent, always (sigma inf)": ("oappo", {"sigma": float("inf")}),
+    "oappo a net per agent, sampled source": ("oappo", {"reuse_mode": "sample"}),
+    "happo again": ("happo", {}),
+}
+
+
+def measure(cfg) -> dict:
+    with tempfile.TemporaryDirectory() as out:
+        timing = {}
+        tic = time.process_time()
+        rows = train(cfg, out, progress=False, timing=timing)
+        cpu = time.process_time() - tic
+        history = load_history(out)
+    steps = cfg.steps
+    sources = [np.count_nonzero(h["reuse_matrix"] > 0, axis=1).mean() for h in history if "reuse_matrix" in h]
+    loop = rows["cpu_s"].iloc[-1] - rows["cpu_s"].iloc[0]  # the record: less building the envs and the first evaluation
+    return {"loop": 1000 * loop / steps, "learn": 1000 * timing["learn"] / steps, "total": 1000 * cpu / steps,
+            "sources": float(np.mean(sources)) if sources else 1.0}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--envs", nargs="+", default=list(FIGURE))
+    parser.add_argument("--periods", type=int, default=1, help="evaluation periods per run")
+    args = parser.parse_args()
+    warm_up()
+    for env in args.envs:
+        print(f"\n{env}: CPU-s per 1,000 env steps (loop: the run's own record, less building the envs and the first "
+              "evaluation; learn: the learner's share of it), ratio to HAPPO's first run")
+        base = None
+        for name, (label, change) in READINGS.items():
+            if label not in {r.label for r in grid.runs_of(FIGURE[env], "cpu")}:
+                continue
+            cfg = cut_short(FIGURE[env], "cpu", label, env, 1)
+            cfg = dataclasses.replace(cfg, steps=args.periods * cfg.eval_every * cfg.iteration_steps, **change)
+            m = measure(cfg)
+            base = base or m
+            print(f"  {name:44s} loop {m['loop']:.3f} ({m['loop'] / base['loop']:.2f}x)  learn {m['learn']:.3f} "
+                  f"({m['learn'] / base['learn']:.2f}x)  sources per learner {m['sources']:.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
