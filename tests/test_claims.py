@@ -82,7 +82,8 @@ def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
 REASONS = {
     verdicts.REPRODUCED: r": wholly (above|below|at or above) ", verdicts.CONTRADICTED: r": wholly on the other side of ",
     verdicts.DIRECTION: r": point estimate [^;]*, interval across ", verdicts.NOT: r": point estimate not ",
-    verdicts.NOT_REUSE: r"reused at \d+% of its evaluated iterations .* below \d+%$",
+    verdicts.NOT_REUSE: r"reused across networks at \d+% of its evaluated iterations .* below \d+%$",
+    verdicts.SHARING: r"below \d+%: its seats share networks, so the claim tests parameter sharing$",
     verdicts.NOT_TESTABLE: r"(did not learn|fewer than 2 seeds on disk|^no seed of .* reached)", claims.NOT_RUN: claims.NO_RUN,
 }
 
@@ -94,6 +95,10 @@ def test_every_row_of_the_glance_gives_the_reason_of_its_own_status_and_no_other
     pairs = list(zip(table["verdict"], table["why"])) + [
         (v, why) for v, why in zip(table["at 5 seeds"], table["why at 5 seeds"]) if v != "-"]
     for status, why in pairs:
+        if status in (verdicts.NOT_REUSE, verdicts.SHARING) and verdicts.INTERVAL_ALONE in why:
+            # why the runs did not test reuse, then what the interval read and its status
+            why, inner, interval = re.fullmatch(rf"(.*); {verdicts.INTERVAL_ALONE} ([^:]*): (.*)", why).groups()
+            assert re.search(REASONS[inner], interval), (inner, interval)
         assert re.search(REASONS[status], why), (status, why)
         assert not [s for s, pattern in REASONS.items() if s != status and re.search(pattern, why)], (status, why)
     # the summary counts every claim once, a row of claims without runs as its claims

@@ -339,6 +339,9 @@ class PPOFamilyLearner:
             "kl_matrix": np.round(K, 6), "reuse_matrix": np.round(M, 6),
             # reuse made visible at every iteration (the matrices reach the results rows at evaluations only)
             "peer_share": round(reuse.peer_share(M), 6), "kl_nearest": np.round(reuse.nearest_peer(K), 6),
+            # the weight on seats of other networks: the reuse Eq. 9's gate decided (seats that share a
+            # network always weigh each other, at KL 0)
+            "across_share": round(reuse.peer_share(M, self.owner), 6),
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
             metrics["agreement"] = np.round(C, 6)

@@ -10,8 +10,8 @@ from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.a2c_family import beside_ppo
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.reuse import KL_REDUCES, SCHEMES
-from oapo_lite.study.verdicts import (FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal, reliable,
-                                      stabler, stuck)
+from oapo_lite.study.verdicts import (FRAC_OPT, RETURN, SCORE, WIN_RATE, Metric, better, faster, higher, optimal,
+                                      paired_higher, reliable, stabler, stuck)
 
 
 @dataclass(frozen=True)
@@ -245,6 +245,46 @@ def _smax_claims(m: str) -> list:
 FIGA_READINGS = {r: SMAX_READINGS[r] for r in FIGA_CURVES if r in SMAX_READINGS}
 
 
+# Eq. 9's selection on the engines (``study/selection.py``): per env, no reuse (HAPPO), a net per
+# agent reusing always (sigma = inf) and through the gate, and on 2s3z a net per kind reusing
+# within its kind only (lambda = 1) and across kinds through the gate; each family at its Fig. 4
+# setting, on ten seeds that chose no setting (the sweep used 0-2, Fig. 4 and the sigma rule 0-4,
+# the early-reuse study 0-9). Sigma per (env, reading): ``selection.gate_sigma``'s rule, fixed
+# before these runs (a test recomputes it from the committed runs).
+SELECTION_SIGMA = {("smax:2s3z", "agent"): 0.046, ("smax:6h_vs_8z", "agent"): 0.068, ("smax:2s3z", "type"): 0.045,
+                   (HALFCHEETAH, "agent"): 0.049}
+SELECTION_SEEDS = tuple(range(10, 20))
+SELECTION_SMAX = ("smax:2s3z", "smax:6h_vs_8z")
+
+
+def selection_curves(env: str, per_agent: dict, per_kind: dict | None = None) -> tuple:
+    """The selection ablation's curves on ``env`` from the families' settings."""
+    gated = dict(per_agent, algo="oappo", kl_reduce="mean", env=env)
+    curves = [("happo", dict(per_agent, algo="happo", env=env)), ("oappo always", dict(gated, sigma=float("inf"))),
+              ("oappo gated", dict(gated, sigma=SELECTION_SIGMA[env, "agent"]))]
+    if per_kind is not None:
+        kind = dict(per_kind, env=env)
+        curves += [("oappo type own kind", dict(kind, reuse_lambda=1.0)),
+                   ("oappo type gated", dict(kind, sigma=SELECTION_SIGMA[env, "type"]))]
+    return tuple(curves)
+
+
+def selection_claims(env: str, prefix: str = "") -> list:
+    """The ablation's claims on ``env``: does reuse help, does selection, and across kinds."""
+    name = env.removeprefix(prefix)
+    sigma = SELECTION_SIGMA[env, "agent"]
+    out = [(paired_higher, ("oappo gated", "happo"), f"{name}: gated reuse (a net per agent, sigma {sigma:g}) ends "
+                                                      "above no reuse (HAPPO)"),
+           (paired_higher, ("oappo gated", "oappo always"), f"{name}: gated reuse ends above always-on reuse "
+                                                             "(selection helps)"),
+           (paired_higher, ("oappo always", "happo"), f"{name}: always-on reuse ends above no reuse")]
+    if (env, "type") in SELECTION_SIGMA:
+        out.append((paired_higher, ("oappo type gated", "oappo type own kind"),
+                    f"{name}: a net per kind reusing across kinds through the gate (sigma "
+                    f"{SELECTION_SIGMA[env, 'type']:g}) ends above one reusing within its kind only"))
+    return [(name, *c) if prefix else c for c in out]
+
+
 # Issue 32: HARL's tuned HalfCheetah 2x3 HAPPO settings tried in our loop one at a time, then
 # together, against App. A's cpu settings, at 1M steps and 10 evaluation episodes
 HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=15), "128x3": dict(hidden=(128, 128, 128)),
@@ -369,6 +409,13 @@ GRID = (
                  for c in ((higher, (r, "seac"), f"{name} ends above direct reuse (SEAC)"),
                            (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)")))),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+    Figure("fig_selection_smax", tuple(c for env in SELECTION_SMAX for c in selection_curves(
+        env, tuned("happo"), tuned("oappo type") if env.removeprefix("smax:") in SMAX_HETEROGENEOUS else None)),
+           common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("smoke", "cpu"), budgets={
+               "smoke": dict(steps=6_400, eval_every=1, eval_episodes=8, seeds=(10,)),
+               "cpu": dict(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64)},
+           metric=WIN_RATE, claims=tuple(c for env in SELECTION_SMAX for c in selection_claims(env, "smax:")),
+           claims_per_env="smax:", section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # Issue 31: does OAPPO's early reuse (its gate is open while the untrained nets look alike)
     # lower the return? Ten seed pairs at 600k steps, each point 10 episodes, so that an
     # interval on the final return's difference can decide it; not a claim of the paper. The

@@ -7,7 +7,8 @@ as a fraction of the oracle optimum), or another measure where there is no oracl
 
 Two numbers summarise a run: the env steps it took to first reach ``threshold`` of the
 optimum (censored at its last step if it never did), and its final fraction of the optimum
-(mean over the last ``tail`` share of its evaluation points: a tenth, a fifth for returns).
+(mean over the last ``tail`` share of its evaluation points, at least ``FINAL_MIN`` of them: a
+tenth, a fifth for returns; ``Metric.window`` names it).
 
 Interval estimates (IQM, probability of improvement, stratified bootstrap) come from
 ``statistics``. The decision rule, with what "a curve learned" means, is ``RULE``, the one place
@@ -15,12 +16,15 @@ it is written (printed where the verdicts are introduced); ``check`` applies it 
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
 from oapo_lite.algorithms import ALGOS
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.neural.nets import owners
 from oapo_lite.reuse import peer_share
 from oapo_lite.study.statistics import Interval, bootstrap_interval, iqm, probability_of_improvement
 
@@ -29,6 +33,8 @@ FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by 
 REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
 CONTRADICTED, NOT_TESTABLE = "contradicted", "not testable at this budget"
 NOT_REUSE = "not a test of reuse"
+INTERVAL_ALONE = "by the interval alone"  # what the interval read, beside a status that says what the runs tested
+SHARING = "a test of sharing"  # a reading whose seats share networks, where reuse across them hardly operated
 # a curve reusing by Eq. 9 tests reuse when some peer weight was given at this share of its
 # evaluated iterations while it learned (issue 31's share for "the gate operates")
 REUSE_PART = 0.25
@@ -50,7 +56,19 @@ class Metric:
     floor: float
     reach: str
     final: str
-    tail: float = 0.1  # the share of a run's last evaluation points its final value averages
+    tail: float = 0.1  # the share of a run's last evaluation points its final value averages (``FINAL_MIN`` at least)
+
+    @property
+    def window(self) -> str:
+        """The final window in words, as every table and figure names it."""
+        return f"the last {_share(self.tail)} of the evaluations, at least {FINAL_MIN}"
+
+
+FINAL_MIN = 3  # evaluations in a final window at least: one evaluation is too noisy a final value
+
+
+def _share(tail: float) -> str:
+    return {0.1: "tenth", 0.2: "fifth"}.get(tail, f"{tail:.0%}")
 
 
 FRAC_OPT = Metric("frac_opt", THRESHOLD, -np.inf, "{:.0%} of the optimum", "final fraction of the optimum")
@@ -84,9 +102,9 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
                          "a run has one row per evaluation (two runs with one seed under one label?)")
     for (label, seed), run in df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False):
         hit = run.loc[run[y] >= threshold, "step"]
-        k, k0 = max(1, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))
+        k, k0 = max(FINAL_MIN, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))
         held = run[y].dropna()  # the windows hold k and k0 evaluations with a value
-        steps, shares = _peer_shares(run)
+        steps, shares = _peer_shares(run, _owner(run))
         learning = steps <= (hit.iloc[0] if len(hit) else np.inf)
         rows.append({
             "label": label,
@@ -108,13 +126,35 @@ PER_RUN_COLUMNS = ["label", "seed", "steps_to_threshold", "reached", "initial", 
                    "last_reuse_step", "gaps"]
 
 
-def _peer_shares(run: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+def _peer_shares(run: pd.DataFrame, owner=None) -> tuple[np.ndarray, np.ndarray]:
     """(step, ``peer_share`` of M) at a run's evaluated iterations that recorded M (none for
-    SEAC, SePS, or data without the column)."""
+    SEAC, SePS, or data without the column); with ``owner`` (each seat's network), the share on
+    other networks' seats alone."""
     if "reuse_matrix" not in run:
         return np.zeros(0), np.zeros(0)
     run = run[run["reuse_matrix"].notna()]
-    return run["step"].to_numpy(float), run["reuse_matrix"].map(peer_share).to_numpy(float)
+    return run["step"].to_numpy(float), run["reuse_matrix"].map(lambda m: peer_share(m, owner)).to_numpy(float)
+
+
+def _owner(run: pd.DataFrame) -> list[int] | None:
+    """The network of each seat of a run, from its config columns (``nets.owners`` of its
+    networks reading and its env's seat kinds); None where the rows do not say (every seat
+    then counts as its own network)."""
+    if not {"env", "algo"} <= set(run.columns) or run["algo"].iloc[0] not in ALGOS:
+        return None
+    first = run.iloc[0]
+    networks = first.get("networks")
+    kind = networks if isinstance(networks, str) else ("one" if ALGOS[first["algo"]].shared else "agent")
+    kinds = _agent_types(str(first["env"]), int(first["max_steps"]) if "max_steps" in run else 50)
+    return None if kinds is None else owners(kind, kinds)
+
+
+@functools.cache
+def _agent_types(env: str, max_steps: int) -> tuple | None:
+    try:
+        return tuple(env_registry.agent_types(env, max_steps))
+    except (ValueError, ImportError):  # a map text flattened into one line, an engine not installed here
+        return None
 
 
 def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
@@ -242,6 +282,9 @@ class Evidence:
         self.summary = _summary_of(self.runs)
         # each curve's algorithm (where the data names it): which curves reuse by Eq. 9
         self.algos = df.groupby("label", sort=False)["algo"].first().to_dict() if "algo" in df else {}
+        # which curves' seats share networks (where the data names the reading)
+        self.sharing = {label: len(set(owner)) < len(owner) for label, run in df.groupby("label", sort=False)
+                        if (owner := _owner(run)) is not None} if len(df) else {}
 
     def run_values(self, label, stat: str) -> np.ndarray:
         """Per-seed values of the per-run statistic ``stat`` (a key of ``RUN_STATS``) for one curve."""
@@ -284,10 +327,13 @@ RULE = f"""How a verdict is decided (oapo_lite.study.verdicts), in this order:
    level is not above its initial level by more than {LEARN_SE:g} standard errors of the gain over
    seeds, or ends at or below the metric's floor: a 5% win rate or score), or, for "faster",
    no seed of either curve reached the threshold (for "faster" and "as reliably").
-2. Not a test of reuse: a claim that a curve reusing by Eq. 9 (OAPPO, OATRPO) beats a curve of
-   another algorithm, where that curve gave some peer's experience a positive weight at fewer
-   than {REUSE_PART:.0%} of its evaluated iterations while it learned (up to its first reaching the
-   threshold; all of them if it never did), mean over seeds; it says when the gate last opened.
+2. Not a test of reuse: a claim that a curve reusing by Eq. 9 (OAPPO, OATRPO) beats another
+   curve, where that curve gave the seats of other networks a positive weight at
+   fewer than {REUSE_PART:.0%} of its evaluated iterations while it learned (up to its first reaching
+   the threshold; all of them if it never did), mean over seeds (seats that share a network
+   always weigh each other, at KL 0: that is parameter sharing, not a gate's decision); it says
+   when the gate last opened across networks. Where the curve's seats share networks, the claim
+   is a test of sharing instead. Either way the interval's reading (step 3) is given beside it.
 3. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
    P(a better than b) (or of the final IQM, for "stays below" / "reaches"; of the share of seeds
    that reached the threshold minus the other curve's, for "as reliably") is on the claimed
@@ -371,6 +417,19 @@ def higher(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` ends at a higher level (fraction of the optimum, win rate, return) than ``b``."""
     return _pairwise(ev, a, b, "final", claim,
                      evidence=f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)} vs {_fmt_final(ev, b)}")
+
+
+def paired_higher(ev: Evidence, a, b, claim: str) -> Verdict:
+    """Claim: ``a`` ends at a higher level than ``b``, seed by seed: the mean over seeds of
+    a's final value minus b's, where one seed gave both runs the same initial networks and
+    environments (the pairs resampled whole), read against 0."""
+    runs = ev.runs.pivot(index="seed", columns="label", values="final").reindex(columns=[a, b]).dropna()
+    d = bootstrap_interval(np.mean, (runs[a] - runs[b]).to_numpy())
+    status = _side(d, 0.0, True)
+    estimate = f"{a} minus {b}, paired over {len(runs)} seeds: {d.fmt()}"
+    return Verdict(claim, status, f"{ev.metric.final} ({ev.metric.window}), IQM [95% CI]: {_fmt_final(ev, a)} vs "
+                                  f"{_fmt_final(ev, b)}; paired difference {d.fmt()} ({(runs[a] > runs[b]).sum()} of "
+                                  f"{len(runs)} seeds higher).", estimate, _reason(status, estimate, "above 0", 0))
 
 
 def stabler(ev: Evidence, a, b, claim: str) -> Verdict:
@@ -467,20 +526,25 @@ def _undecidable(ev: Evidence | None, test, labels) -> str | None:
     return None
 
 
-def reuse_gap(ev: Evidence, labels) -> str | None:
-    """Why a claim about ``labels`` cannot test off-agent reuse (``RULE``, step 2), or None: it
-    says a curve reusing by Eq. 9 beats another algorithm's, and that curve hardly reused."""
-    if len(labels) != 2 or ev.algos.get(labels[0]) not in EQ9_ALGOS or ev.algos.get(labels[0]) == ev.algos.get(labels[1]):
+def reuse_gap(ev: Evidence, labels) -> tuple[str, str] | None:
+    """Why a claim about ``labels`` cannot test off-agent reuse (``RULE``, step 2), as (status,
+    reason), or None: it says a curve reusing by Eq. 9 beats another curve, and that curve hardly
+    gave weight to the seats of other networks. Where the curve shares networks between
+    seats, what it tested is parameter sharing (``SHARING``); else nothing of reuse (``NOT_REUSE``)."""
+    if len(labels) != 2 or ev.algos.get(labels[0]) not in EQ9_ALGOS:
         return None
     a, s = labels[0], ev.summary.loc[labels[0]]
     if s["reusing"] >= REUSE_PART:
         return None
     if np.isnan(s["reusing"]):
-        return f"{a}'s runs hold no reuse matrix, so whether it reused is unknown"
-    last = ("no seed ever gave a peer weight" if np.isnan(s["last_reuse_step"])
-            else f"the gate last opened at {s['last_reuse_step']:,.0f} steps")
-    return (f"{last}; {a} reused at {s['reusing']:.0%} of its evaluated iterations while it learned (mean over "
-            f"seeds), below {REUSE_PART:.0%}")
+        return NOT_REUSE, f"{a}'s runs hold no reuse matrix, so whether it reused is unknown"
+    last = ("no seed ever gave another network's seats weight" if np.isnan(s["last_reuse_step"])
+            else f"the gate last opened across networks at {s['last_reuse_step']:,.0f} steps")
+    gap = (f"{last}; {a} reused across networks at {s['reusing']:.0%} of its evaluated iterations while it learned "
+           f"(mean over seeds), below {REUSE_PART:.0%}")
+    if ev.sharing.get(a):
+        return SHARING, f"{gap}: its seats share networks, so the claim tests parameter sharing"
+    return NOT_REUSE, gap
 
 
 def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
@@ -491,7 +555,8 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     if why:
         return Verdict(claim, NOT_TESTABLE, "", "", why)
     verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
-    verdict = replace(verdict, status=NOT_REUSE, reason=gap) if gap else verdict
+    if gap:  # the interval's reading stays beside the status that says what the runs tested
+        verdict = replace(verdict, status=gap[0], reason=f"{gap[1]}; {INTERVAL_ALONE} {verdict.status}: {verdict.reason}")
     gaps = ev.runs.groupby("label")["gaps"].sum()
     gaps = [f"{int(gaps[x])} of {x}'s" for x in labels if gaps[x]]
     if gaps:  # (``per_run``) never silently: an evaluation without a value is left out of its run's numbers

@@ -1,0 +1,59 @@
+"""Eq. 9's selection tested on the engines: gated reuse against no reuse (HAPPO) and against
+always-on reuse (sigma = inf), seed-paired, and, where seats share a network per kind, reuse
+across kinds against none (lambda = 1). The runs are ``grid``'s ``fig_selection_*`` figures.
+
+The gate's sigma was fixed per env and reading before any of those runs, by a rule that reads
+K alone, never a return (``gate_sigma``): the median of the across-network K[i, j] at the
+evaluated iterations of the committed ``cpu`` runs of that reading on that env (Fig. 4's on SMAX,
+App. A's on HalfCheetah; seeds 0-4, the engines' gate statistic, the mean), to two significant
+digits. Under it the gate was open on about half of those runs' pair-iterations, so in the new
+runs it can both open and shut; ``gate_use`` measures how often it did.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from oapo_lite.envs import registry as env_registry
+from oapo_lite.neural.nets import owners
+from oapo_lite.study import experiments, grid
+
+# (env, reading) -> the figure and curve label of the committed runs the rule reads
+RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo"), ("smax:6h_vs_8z", "agent"): ("fig4_smax", "oappo"),
+             ("smax:2s3z", "type"): ("fig4_smax", "oappo type"), (grid.HALFCHEETAH, "agent"): ("figA_mamujoco", "oappo")}
+RULE_SEEDS = (0, 1, 2, 3, 4)
+
+
+def across_pairs(kl: np.ndarray, owner: list[int]) -> np.ndarray:
+    """The entries K[i, j] of seats on different networks (the pairs a gate decides)."""
+    return np.asarray(kl)[~np.equal.outer(owner, owner)]
+
+
+def gate_sigma(env: str, reading: str) -> float:
+    """The rule (module docstring): sigma for the gated curve of ``reading`` on ``env``."""
+    figure, label = RULE_RUNS[env, reading]
+    values = []
+    for run in grid.runs_of(figure, "cpu"):
+        if run.label == label and run.cfg.env == env and run.cfg.seed in RULE_SEEDS:
+            owner = owners(run.cfg.network_kind, env_registry.agent_types(env, run.cfg.max_steps))
+            for kl in experiments.read_run(run.cfg, "cpu")["kl_matrix"].dropna():
+                values.extend(across_pairs(kl, owner))
+    return float(f"{np.median(values):.2g}")
+
+
+def gate_use(df: pd.DataFrame, sigma_of: dict) -> pd.DataFrame:
+    """Per env and curve, from the evaluated iterations' K: the share of across-network
+    pair-iterations with K <= the curve's sigma (the gate open) and above it (shut), and M's
+    mean weight on other networks' seats (``across_share``)."""
+    rows = []
+    for (env, label), part in df[df["kl_matrix"].notna()].groupby(["env", "label"], sort=False):
+        cfg = part.iloc[0]
+        owner = owners(cfg["networks"] if isinstance(cfg["networks"], str) else "agent",
+                       env_registry.agent_types(env, int(cfg["max_steps"])))
+        sigma = sigma_of.get((env, label), float(cfg["sigma"]))
+        k = np.concatenate([across_pairs(m, owner) for m in part["kl_matrix"]]) if len(set(owner)) > 1 else np.zeros(0)
+        rows.append({"env": env, "label": label, "sigma": sigma, "pair-iterations": len(k),
+                     "open": float(np.mean(k <= sigma)) if len(k) else np.nan,
+                     "shut": float(np.mean(k > sigma)) if len(k) else np.nan,
+                     "across_share": float(part["across_share"].mean()) if "across_share" in part else np.nan})
+    return pd.DataFrame(rows)
