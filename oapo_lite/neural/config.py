@@ -154,6 +154,9 @@ class TrainConfig:
     feature_norm: bool = _field(
         False, "a LayerNorm on the inputs of every actor and of the critic (HARL's use_feature_normalization; PPO / "
                "TRPO family)", SWITCH)
+    normalize: bool = _field(
+        False, "running normalisation of observations, states and rewards, as stable-baselines3's VecNormalize "
+               "(oapo_lite/neural/normalize.py)", SWITCH)
 
     def __post_init__(self):
         def need(ok: bool, name: str, allowed: str | None = None):
@@ -194,7 +197,7 @@ class TrainConfig:
         real("backtrack", lambda x: 0.0 < x < 1.0)
         need(self.kl_reduce in KL_REDUCES, "kl_reduce")
         need(self.reuse_mode in ("weights", "sample"), "reuse_mode")
-        for name in ("lr_anneal", "value_norm", "entropy_by_weight", "feature_norm"):
+        for name in ("lr_anneal", "value_norm", "entropy_by_weight", "feature_norm", "normalize"):
             need(isinstance(getattr(self, name), (bool, np.bool_)), name)
         need(self.bootstrap_truncation is None or isinstance(self.bootstrap_truncation, (bool, np.bool_)),
              "bootstrap_truncation")

@@ -20,6 +20,7 @@ from oapo_lite.neural.a2c_family import A2CFamilyLearner
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.learner import Learner
 from oapo_lite.neural.nets import Actors, owners
+from oapo_lite.neural.normalize import Moments, Normalized
 from oapo_lite.neural.ppo_family import PPOFamilyLearner
 from oapo_lite.neural.rollout import make_env
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
@@ -84,6 +85,10 @@ class RunState:
     def start(cls, cfg: TrainConfig) -> "RunState":
         env = make_env(cfg, cfg.n_envs, seed=cfg.seed)
         eval_env = make_env(cfg, cfg.eval_episodes, seed=derive_seed(cfg.seed, 2))
+        if cfg.normalize:  # the evaluation reads the training copies' statistics
+            moments = Moments.of(env)
+            env, eval_env = Normalized(env, moments, cfg.gamma, train=True), Normalized(eval_env, moments, cfg.gamma,
+                                                                                      train=False)
         torch.manual_seed(cfg.seed)
         init_gen = torch.Generator().manual_seed(cfg.seed)
         actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,

@@ -459,6 +459,15 @@ GRID = (
            common=dict(ppo_epochs=15), runs_at=("cpu",),
            budgets={"cpu": HALFCHEETAH_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # App. A's HAPPO against the same with running normalisation of observations, states and rewards
+    # (stable-baselines3's VecNormalize, which the single-agent anchor uses), seeds 0-4: the rule,
+    # fixed before the runs, for the HalfCheetah selection ablation's learner: the one with the higher
+    # final IQM (the last fifth of the evaluations, at least 3)
+    Figure("fig_mamujoco_normalize", (("happo", FIGA_CURVES["happo"]), ("happo normalized", dict(algo="happo",
+                                                                                               normalize=True))),
+           common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
+               "smoke": MAMUJOCO_SMOKE, "cpu": dict(HALFCHEETAH_1M, seeds=(0, 1, 2, 3, 4))},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", _reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
