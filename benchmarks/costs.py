@@ -33,7 +33,7 @@ from oapo_lite.study.costs import COSTS, KEY, cost_key
 from loops import warm_up
 
 
-CAP = 64_000  # env steps measured at most: a paper budget's evaluation period can be hundreds of thousands
+CAP = 16_000  # env steps measured at most: a paper budget's evaluation period can be hundreds of thousands
 
 
 def measure(cfg) -> dict:

@@ -29,7 +29,8 @@ def test_the_readme_carries_the_claims_table_the_data_gives():
     """The README's copy of the claims table is what the committed runs give today."""
     block, table = claims.readme_block(), claims.glance()
     assert block == claims.readme_markdown(table), "the README's claims table is stale: run python -m oapo_lite.study.claims"
-    assert block.endswith(claims.markdown(table)) and len(claims.MEANING) == len(set(claims.SHORT.values()))
+    assert block.endswith(claims.markdown(table))
+    assert all(f"- *{status}*: {meaning}." in block for status, meaning in verdicts.STATUSES.items())
 
 
 def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
@@ -81,10 +82,10 @@ def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
 # ``reuse_gap``), so that a row can be checked to give the reason of its own status and no other's
 REASONS = {
     verdicts.REPRODUCED: r": wholly (above|below|at or above) ", verdicts.CONTRADICTED: r": wholly on the other side of ",
-    verdicts.DIRECTION: r": point estimate [^;]*, interval across ", verdicts.NOT: r": point estimate not ",
+    verdicts.WITHIN_NOISE: r": point estimate [^;]*, interval across ", verdicts.NOT: r": point estimate not ",
     verdicts.NOT_REUSE: r"reused across networks at \d+% of its evaluated iterations .* below \d+%$",
     verdicts.SHARING: r"below \d+%: its seats share networks, so the claim tests parameter sharing$",
-    verdicts.NOT_TESTABLE: r"(did not learn|fewer than 2 seeds on disk|^no seed of .* reached)", claims.NOT_RUN: claims.NO_RUN,
+    verdicts.NOT_TESTABLE: r"(did not learn|fewer than 2 seeds on disk|^no seed of .* reached)", verdicts.NOT_RUN: verdicts.NO_RUN,
 }
 
 
@@ -109,11 +110,11 @@ def test_the_conclusion_names_every_claim_once_under_its_status():
     import re
 
     table = claims.glance()
-    labels = "|".join(sorted(map(re.escape, claims.SHORT.values()), key=len, reverse=True))
+    labels = "|".join(sorted(map(re.escape, verdicts.STATUSES), key=len, reverse=True))
     under = {}  # (section, status) -> the text the paragraph gives under it
     for section, text in zip(table["section"].unique(), claims.conclusion(table)):
         parts = re.split(rf"(?:^|(?<=[.:]) )({labels}): ", text)
         under |= {(section, status): body for status, body in zip(parts[1::2], parts[2::2])}
     for section, claim, status in zip(table["section"], table["claim"], table["verdict"]):
-        assert claim in under[section, claims.SHORT[status]], (section, status, claim)
+        assert claim in under[section, status], (section, status, claim)
     assert sum(text.count("; ") + 1 for text in under.values()) >= len(table)

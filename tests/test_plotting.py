@@ -7,7 +7,7 @@ import pytest
 from matplotlib.animation import FuncAnimation
 
 from oapo_lite.envs import load_maze
-from oapo_lite.study import plotting
+from oapo_lite.study import palette, plotting
 
 
 def _discs(ax):
@@ -20,7 +20,7 @@ def test_episode_animation_frames_markers_and_offline_html():
     # flat cells for one label, (row, col) pairs for the other; seat 0 is red, seat 1 black
     short = [list(start), [start[0] - 1, start[1] + 1], [start[0] - 2, start[1] + 2]]
     long = [[(7, 4), (7, 4)], [(7, 3), (7, 4)], [(7, 2), (7, 5)], [(7, 1), (7, 6)], [(6, 1), (7, 7)]]
-    anim = plotting.episode_animation(maze, {"A": short, "B": long}, title="test")
+    anim = plotting.episode_animation(maze, {"mappo": short, "oappo": long}, title="test")
     assert isinstance(anim, FuncAnimation)
     assert len(list(anim.new_frame_seq())) == len(long) == 5
 
@@ -32,7 +32,7 @@ def test_episode_animation_frames_markers_and_offline_html():
         for ax, traj in zip(axes, (short, long)):
             discs = _discs(ax)
             assert len(discs) == maze.n_agents  # one marker per agent per panel
-            assert [d.get_color() for d in discs] == [plotting.AGENT_COLORS[a] for a in maze.agents]
+            assert [d.get_color() for d in discs] == [palette.AGENT_COLORS[a] for a in maze.agents]
             step = traj[min(k, len(traj) - 1)]  # a shorter episode stays on its last step
             for seat, disc in enumerate(discs):
                 row, col = maze.cell(step[seat]) if np.ndim(step[seat]) == 0 else step[seat]
@@ -40,7 +40,7 @@ def test_episode_animation_frames_markers_and_offline_html():
                 assert abs(x - col) < 0.5 and abs(y - row) < 0.5  # drawn inside the agent's cell
             assert f"step {min(k, len(traj) - 1)} of {len(traj) - 1}" in ax.get_title()
     # the star panel title: every agent on the star at the last step of an arrived episode
-    arrived = plotting.episode_animation(maze, {"X": [list(start), [star, star]]})
+    arrived = plotting.episode_animation(maze, {"happo": [list(start), [star, star]]})
     arrived._func(1)
     assert "every agent on the star" in arrived._fig.axes[0].get_title()
 
@@ -52,8 +52,8 @@ def test_episode_animation_frames_markers_and_offline_html():
 
 def test_episode_animation_rejects_a_trajectory_of_the_wrong_shape():
     maze = load_maze("black_red")
-    with pytest.raises(ValueError, match="trajectory 'A'"):
-        plotting.episode_animation(maze, {"A": [[maze.starts[0]]]})
+    with pytest.raises(ValueError, match="trajectory 'mappo'"):
+        plotting.episode_animation(maze, {"mappo": [[maze.starts[0]]]})
     with pytest.raises(ValueError, match="at least one"):
         plotting.episode_animation(maze, {})
 
@@ -70,14 +70,50 @@ def test_split_outcomes_are_drawn_by_a_level_some_seed_reached_with_every_seed_o
     bold, *seeds = ax.get_lines()[:6]
     assert list(bold.get_ydata()) == [0.0, -0.015, -0.03]  # the median seed, step by step
     assert all(line.get_zorder() > bold.get_zorder() for line in seeds)
-    assert plotting.color_of("AR") == plotting.ALGO_COLORS["mappo"] and plotting.color_of("NR") == plotting.ALGO_COLORS["happo"]
+    assert bold.get_color() == palette.color("AR")
     bars = plotting.final_bars(pd.DataFrame(dict(label="AR", seed=list(levels), final=list(levels.values()))))
     assert [b.get_height() for b in bars.patches] == [-0.03]
-    even = pd.DataFrame(dict(label="x", seed=range(4), final=[0.0, 0.0, 1.0, 1.0]))
+    even = pd.DataFrame(dict(label="NR", seed=range(4), final=[0.0, 0.0, 1.0, 1.0]))
     assert [b.get_height() for b in plotting.final_bars(even).patches] == [0.0]  # the lower middle run, not 0.5
     plt.close("all")
 
 
-def test_a_sweep_keeps_the_papers_default_in_oappos_colour():
-    colors = plotting.sweep_colors(["0.01", "0.1", "1", "10"], "0.1")
-    assert colors["0.1"] == plotting.ALGO_COLORS["oappo"] and len({str(c) for c in colors.values()}) == 4
+def _figure_curves(figure) -> list[str]:
+    """A grid figure's curves as the figures name them (a sweep's value as "sigma = 0.1")."""
+    from oapo_lite.study import grid
+
+    sweep = {"fig3c": "sigma", "fig3d": "lambda"}.get(figure.id)
+    return [f"{sweep} = {label:g}" if sweep else str(label) for label, _ in figure.curves]
+
+
+def test_two_curves_of_a_figure_never_share_a_colour_and_a_curve_keeps_its_own():
+    from oapo_lite.study import grid
+
+    tuning = ("fig_sweep_2s3z", "fig_a2c_smax")  # drawn as tables, a row per setting
+    for figure in (f for f in grid.GRID if f.id not in tuning):
+        names = list(dict.fromkeys(_figure_curves(figure)))
+        colours = [palette.color(n) for n in names]  # every curve has one: a missing one raises
+        assert len(set(colours)) == len(colours), (figure.id, names, colours)
+    # the paper's sigma and lambda are OAPPO itself; every other colour is one curve's, and none an agent's
+    shared = {c for c in palette.PALETTE.values() if list(palette.PALETTE.values()).count(c) > 1}
+    assert shared == {palette.OAPPO}
+    assert {k for k, c in palette.PALETTE.items() if c == palette.OAPPO} == {"oappo", "sigma = 0.1", "lambda = 0.7"}
+    assert not set(palette.PALETTE.values()) & set(palette.AGENT_COLORS.values())
+    with pytest.raises(ValueError, match="no colour for the curve 'a new curve'; add it to"):
+        palette.color("a new curve")
+
+
+def test_no_notebook_picks_a_colour_of_its_own():
+    """Inline plots take every curve's colour from the palette: no colour map or colour cycle of
+    matplotlib's, no literal colour."""
+    import re
+
+    import nbformat
+
+    from oapo_lite.study.reproduce import NOTEBOOKS
+
+    own = re.compile(r"plt\.cm\.|color=\"#|color=\"(tab|C)\d|ALGO_COLORS|sweep_colors")  # an image may take a cmap
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        for cell in nbformat.read(path, as_version=4).cells:
+            if cell.cell_type == "code":
+                assert not own.search(cell.source), (path.name, own.search(cell.source).group())

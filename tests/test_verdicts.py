@@ -129,7 +129,7 @@ def test_faster_and_higher_directions():
 def test_within_noise_is_direction_only():
     ev = evidence({"a": (50_000, 1.0), "b": (51_000, 1.0)}, noise=0.3)
     verdict = v.faster(ev, "a", "b", "a faster")
-    assert verdict.status in (v.DIRECTION, v.NOT) and not verdict.held
+    assert verdict.status in (v.WITHIN_NOISE, v.NOT) and not verdict.held
 
 
 def test_better_uses_final_then_speed():
@@ -152,7 +152,7 @@ def test_stuck_with_some_seeds_escaping_is_direction_only():
     df = pd.concat([curves({"a": (10_000, 0.5)}, seeds=3),
                     curves({"a": (10_000, 1.0)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)])
     verdict = v.stuck(v.Evidence(df), "a", "x")
-    assert verdict.status == v.DIRECTION
+    assert verdict.status == v.WITHIN_NOISE
     assert verdict.estimate.startswith("IQM final 0.667 [")
 
 
@@ -182,7 +182,7 @@ def test_claim_table_has_a_row_per_budget_and_claim():
 def test_one_seed_is_never_more_than_direction():
     ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
     verdict = v.faster(ev, "fast", "slow", "x")
-    assert verdict.status == v.DIRECTION
+    assert verdict.status == v.WITHIN_NOISE
 
 
 def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
@@ -195,7 +195,7 @@ def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
     assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
     # a censored seed ranks behind every seed that got there: P = (3 x 5 wins) / 25 pairs
     verdict = v.faster(ev, "a", "b", "a faster")
-    assert verdict.estimate.startswith("P(a faster) 0.600 ") and verdict.status == v.DIRECTION
+    assert verdict.estimate.startswith("P(a faster) 0.600 ") and verdict.status == v.WITHIN_NOISE
     assert "3/5 seeds reached" in verdict.evidence
     # "as reliably": 3/5 against 5/5, a difference of -0.4 whose interval reaches 0 (a resample of
     # a's seeds can draw only its converged ones): not reproduced; a tie holds
@@ -236,10 +236,10 @@ def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     out = {x.claim: x for x in judge("fig4_smax", win_curves(learned))}
     assert out["2s3z: OAPPO (a net per agent) ends above MAPPO (heterogeneous agents)"].held
     assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].held
-    assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_TESTABLE  # no run on that map
+    assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_RUN  # no run on that map
     assert out["2s3z: OAPPO (a net per kind) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
     nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
-    assert {x.status for x in judge("fig4_smax", nothing)} == {v.NOT_TESTABLE}
+    assert {x.status for x in judge("fig4_smax", nothing)} == {v.NOT_TESTABLE, v.NOT_RUN}  # maps without runs: not run
     one_seed = {x.claim: x for x in judge("fig4_smax", win_curves(learned, seeds=1))}
     verdict = one_seed["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"]
     assert verdict.status == v.NOT_TESTABLE and "fewer than 2 seeds" in verdict.reason
@@ -262,7 +262,7 @@ def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data
     swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))
     assert not {x.claim: x for x in judge("figA_mamujoco", swapped)}[
         "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
-    assert all(x.status == v.NOT_TESTABLE for x in judge("figA_mamujoco", pd.DataFrame()))
+    assert all(x.status == v.NOT_RUN for x in judge("figA_mamujoco", pd.DataFrame()))
 
 
 def test_grf_claims_are_judged_per_scenario_on_the_score():
@@ -276,9 +276,9 @@ def test_grf_claims_are_judged_per_scenario_on_the_score():
     assert out["counterattack_easy: OAPPO ends above MAPPO"].held
     assert "final score" in out["counterattack_easy: OAPPO ends above MAPPO"].evidence
     # scenarios or algorithms without runs cannot be judged
-    assert out["counterattack_easy: OAPPO ends above SEAC"].status == v.NOT_TESTABLE
-    assert out["counterattack_hard: OATRPO ends above HAPPO"].status == v.NOT_TESTABLE
-    assert out["pass_and_shoot_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].status == v.NOT_TESTABLE
+    assert out["counterattack_easy: OAPPO ends above SEAC"].status == v.NOT_TESTABLE  # no SEAC run there
+    assert out["counterattack_hard: OATRPO ends above HAPPO"].status == v.NOT_RUN  # no run of that scenario
+    assert out["pass_and_shoot_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].status == v.NOT_RUN
 
 
 # --- the rule judges only what learned (issue 20) ------------------------------------------
@@ -338,7 +338,7 @@ def test_two_learned_curves_with_p_above_one_half_are_reproduced():
 
 
 def test_the_printed_rule_names_every_status():
-    for word in ("Not testable", "did not learn", "reproduced", "contradicted", "direction only",
+    for word in ("Not testable", "did not learn", "reproduced", "contradicted", "within noise",
                  "not reproduced", "as reliably", "Not a test of reuse", "25%"):
         assert word in v.RULE
 

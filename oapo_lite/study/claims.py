@@ -100,31 +100,6 @@ def _verdicts(fig: grid.Figure, budget: str, required: bool) -> tuple[list[verdi
     return judge(fig, df), {(k if fig.claims_per_env else None): n for k, n in seeds.items()}
 
 
-NOT_RUN = "not run"  # a claim about an env with no run at this budget: no data, not a failed curve
-# what each status means, in one line (the README's list; the rule in full is ``verdicts.RULE``)
-MEANING = {
-    verdicts.REPRODUCED: "the whole 95% interval is on the paper's side",
-    verdicts.DIRECTION: "the point estimate is on the paper's side, the interval is not: within noise",
-    verdicts.NOT: "the point estimate is not on the paper's side",
-    verdicts.CONTRADICTED: "the whole 95% interval is on the other side",
-    verdicts.NOT_REUSE: "OAPPO / OATRPO hardly reused other networks' experience while it learned, so the claim says "
-                        "nothing about reuse",
-    verdicts.SHARING: "the OAPPO reading shares networks between seats and hardly reused across them, so the claim "
-                      "tests parameter sharing (the interval's reading is given beside it)",
-    verdicts.NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
-    NOT_RUN: "the env has no run on disk at this budget (not trained yet, or only at `paper`, a cluster's job)",
-}
-SHORT = {verdicts.REPRODUCED: "held", verdicts.DIRECTION: "within noise", verdicts.NOT: "not held",
-         verdicts.CONTRADICTED: "contradicted", verdicts.NOT_REUSE: "not a test of reuse",
-         verdicts.SHARING: "a test of sharing",
-         verdicts.NOT_TESTABLE: "not testable", NOT_RUN: "not run"}
-NO_RUN = "no run of this env on disk at this budget"  # ``verdicts._undecidable``'s reason
-
-
-def _status(v: verdicts.Verdict) -> str:
-    return NOT_RUN if v.status == verdicts.NOT_TESTABLE and v.reason == NO_RUN else v.status
-
-
 def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
     """Every claim of the paper's experiments with its notebook, and its verdict, budget and
     reason at the better-powered budget that has its runs (20 seeds on the mazes, where those
@@ -139,19 +114,21 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
         for k, claim in enumerate(fig.claims):
             env = f"{fig.claims_per_env}{claim[0]}" if fig.claims_per_env else None
             v, w = first[k], None if second is None else second[0][k]
-            if _status(v) == NOT_RUN:
+            if v.status == verdicts.NOT_RUN:
                 unrun.setdefault(env, []).append(v.claim.split(": ", 1)[-1])
                 continue
             lead, lead_budget = (w, budgets[1]) if w is not None else (v, budgets[0])
-            rows.append({"section": fig.section, "claim": v.claim, "notebook": fig.notebook, "verdict": _status(lead),
+            rows.append({"section": fig.section, "claim": v.claim, "notebook": fig.notebook, "verdict": lead.status,
                          "budget": budget_share(fig, env, lead_budget, (seeds2 if w is not None else seeds).get(env)),
                          "why": lead.reason,
-                         "at 5 seeds": "-" if w is None else _status(v), "why at 5 seeds": "-" if w is None else v.reason})
+                         "at 5 seeds": "-" if w is None else v.status, "why at 5 seeds": "-" if w is None else v.reason})
         for env, texts in unrun.items():
+            env = env or fig.common.get("env", fig.id)  # a figure on one env
             rows.append({"section": fig.section, "claim": f"{env.removeprefix(fig.claims_per_env or '')}: {len(texts)} "
                                                          f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
-                         "notebook": fig.notebook, "verdict": NOT_RUN, "budget": budget_share(fig, env, budgets[0], 0),
-                         "why": NO_RUN, "at 5 seeds": "-", "why at 5 seeds": "-"})
+                         "notebook": fig.notebook, "verdict": verdicts.NOT_RUN,
+                         "budget": budget_share(fig, env, budgets[0], 0), "why": verdicts.NO_RUN, "at 5 seeds": "-",
+                         "why at 5 seeds": "-"})
     return pd.DataFrame(rows, columns=GLANCE_COLUMNS)
 
 
@@ -166,9 +143,9 @@ def _check_glance(df: pd.DataFrame, needed=("section", "claim", "verdict")) -> N
     if lacking:
         raise ValueError(f"the claims lack the columns {lacking}; they must be glance()'s rows, with columns "
                          f"{GLANCE_COLUMNS}")
-    unknown = sorted(set(map(str, df["verdict"])) - set(SHORT))
+    unknown = sorted(set(map(str, df["verdict"])) - set(verdicts.STATUSES))
     if unknown:
-        raise ValueError(f"the claims hold verdicts {unknown} that are no status; allowed: {list(SHORT)}")
+        raise ValueError(f"the claims hold verdicts {unknown} that are no status; allowed: {list(verdicts.STATUSES)}")
 
 
 def summary(df: pd.DataFrame) -> pd.DataFrame:
@@ -176,10 +153,10 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
     claims without runs counts each of its claims); no claims, no rows."""
     _check_glance(df)
     if df.empty:
-        return pd.DataFrame(columns=list(SHORT.values()), dtype=int)
-    claims_in = df["claim"].where(df["verdict"] == NOT_RUN).str.extract(r": (\d+) claims? \(", expand=False).astype(float).fillna(1).astype(int)
-    counts = pd.crosstab(df["section"], df["verdict"].map(SHORT), values=claims_in, aggfunc="sum").fillna(0).astype(int)
-    return counts.reindex(columns=[c for c in SHORT.values() if c in counts.columns])
+        return pd.DataFrame(columns=list(verdicts.STATUSES), dtype=int)
+    claims_in = df["claim"].where(df["verdict"] == verdicts.NOT_RUN).str.extract(r": (\d+) claims? \(", expand=False).astype(float).fillna(1).astype(int)
+    counts = pd.crosstab(df["section"], df["verdict"], values=claims_in, aggfunc="sum").fillna(0).astype(int)
+    return counts.reindex(columns=[c for c in verdicts.STATUSES if c in counts.columns])
 
 
 def summary_lines(df: pd.DataFrame) -> list[str]:
@@ -212,20 +189,20 @@ def conclusion(df: pd.DataFrame) -> list[str]:
     out = []
     for section, part in df.groupby("section", sort=False):
         n = int(summary(part).to_numpy().sum())
-        budgets = sorted(set(part.loc[part["verdict"] != NOT_RUN, "budget"]))
+        budgets = sorted(set(part.loc[part["verdict"] != verdicts.NOT_RUN, "budget"]))
         lines = [f"Section {section} ({SECTIONS.get(section, section)}), {n} claims"
                  + (f", at {'; '.join(budgets)}" if len(budgets) == 1 else "") + ":"]
-        for status, short in SHORT.items():
+        for status in verdicts.STATUSES:
             these = part.loc[part["verdict"] == status, "claim"]
             if len(these):
-                lines.append(f"{short}: {'; '.join(these)}.")
+                lines.append(f"{status}: {'; '.join(these)}.")
         out.append(" ".join(lines))
     return out
 
 
 def readme_markdown(df: pd.DataFrame) -> str:
     """What the README carries between its markers: the summary, the statuses, the table."""
-    statuses = "\n".join(f"- *{status}*: {meaning}." for status, meaning in MEANING.items())
+    statuses = "\n".join(f"- *{status}*: {meaning}." for status, meaning in verdicts.STATUSES.items())
     return "\n\n".join(["Summary (claims per section):", "\n".join(summary_lines(df)), "What the verdicts mean:", statuses,
                         markdown(df)])
 

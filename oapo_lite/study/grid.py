@@ -415,7 +415,9 @@ GRID = (
                (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
                *(c for r, name in FIGA_READINGS.items()
                  for c in ((higher, (r, "seac"), f"{name} ends above direct reuse (SEAC)"),
-                           (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)")))),
+                           (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)"),
+                           # the clean contrast: the same settings and initial networks per seed, reuse or none
+                           (paired_higher, (r, "happo"), f"{name} ends above no reuse (HAPPO), seed by seed")))),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     Figure("fig_selection_smax", tuple(c for env in SELECTION_SMAX for c in selection_curves(
         env, tuned("happo"), tuned("oappo type") if env.removeprefix("smax:") in SMAX_HETEROGENEOUS else None)),

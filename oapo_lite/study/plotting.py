@@ -6,50 +6,23 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FuncFormatter
 
+from oapo_lite.study import palette
+from oapo_lite.study.palette import AGENT_COLORS, OMITTED, REUSED
+
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
 YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arrival rewards)",
            "eval_return": "episode return (evaluation)", "eval_success": "win rate",
            "peer_share": "peer share: weight on other agents' experience"}
-# One colour per algorithm and per agent in every figure. The agents are named after their
-# colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
-ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
-               "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
-               "oappo adaptive": "#145214", "oappo warm-up 10": "#98df8a",
-               # the selection ablation: gated reuse is OAPPO proper; always-on and within-kind its foils
-               "oappo gated": "#2ca02c", "oappo always": "#d4a017", "oappo type gated": "#1b7f79",
-               "oappo type own kind": "#7fb8b3"}
-# Fig. 5b's reuse schemes: no reuse is HAPPO's scheme and everyone-shares MAPPO's, so they echo them
-SCHEME_COLORS = {"NR": ALGO_COLORS["happo"], "AR": ALGO_COLORS["mappo"], "UR": "#e377c2", "RR": "#17becf"}
-AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
 # env steps in thousands or millions, never matplotlib's "1e6" offset
 STEPS = FuncFormatter(lambda x, _: f"{x / 1e6:g}M" if abs(x) >= 1e6 else f"{x / 1e3:g}k" if x else "0")
-REUSED, OMITTED = "#e6a100", "#9a9a9a"
 
 
-def color_of(label, order=None):
-    """The colour of a curve: its algorithm's (the label, or its first word, any case: "OAPPO",
-    "oappo lambda=0.4"; the adaptive rule has its own) or reuse scheme's, else the label's place in ``order`` on a
-    sequential map (a sigma, a lambda, a reuse scheme), else None (matplotlib's next colour)."""
-    if label in SCHEME_COLORS:
-        return SCHEME_COLORS[label]
-    name = str(label).lower()
-    for key in (name, name.split()[0] if name.strip() else ""):
-        if key in ALGO_COLORS:
-            return ALGO_COLORS[key]
-    if order is not None and label in list(order):
-        k, n = list(order).index(label), len(order)
-        return plt.cm.viridis(0.1 + 0.75 * k / max(n - 1, 1))
-    return None
-
-
-def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None,
-                    colors: dict | None = None):
+def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None):
     """Fig. 3b-d, 4, App. A: every seed as a thin line (on top) and, bold, the median over seeds
     of ``y`` against env steps (the lower middle seed where the count is even, so at every step
     a level some seed reached). Not mean +- std, nor an IQM: outcomes that split into trapped
     and optimal seeds have a mean that describes no run and a band that leaves the possible
-    range. The title gets a line saying so. ``colors``: label -> colour, where a figure needs
-    its own (else ``color_of``)."""
+    range. The title gets a line saying so. Each curve in its colour (``palette.color``)."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     ax = ax or plt.subplots(figsize=(6, 4))[1]
@@ -73,7 +46,7 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
         runs = df[df["label"] == label].pivot(index="step", columns="seed", values=y)
         if runs.isna().all().all():
             raise ValueError(f"curve {label!r} has no value of {y!r} to draw (every evaluation is empty)")
-        color = (colors or {}).get(label) or color_of(label, order)
+        color = palette.color(label)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
         line, = ax.plot(runs.index, median, lw=2.2, label=str(label), color=color, zorder=2)
         seeds_of[label] = (runs, line.get_color())
@@ -90,14 +63,6 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     return ax
 
 
-def sweep_colors(labels, default) -> dict:
-    """Colours for a sweep of one OAPPO setting (Fig. 3c's sigma, 3d's lambda): the paper's
-    default keeps OAPPO's colour, the other values a sequential map without green."""
-    others = [x for x in labels if x != default]
-    return {default: ALGO_COLORS["oappo"]} | {x: plt.cm.plasma(0.55 * k / max(len(others) - 1, 1))
-                                              for k, x in enumerate(others)}
-
-
 def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     """Fig. 5b: final fraction of the optimum per label: every seed as a dot, and the median run's
     level as a bar (the lower middle run where the count is even: a level some run reached; a
@@ -107,7 +72,7 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
         return _no_runs(ax, title)
     order = order if order is not None else list(dict.fromkeys(runs["label"]))
     finals = [runs.loc[runs["label"] == o, "final"].to_numpy(float) for o in order]
-    colors = [color_of(o, order) for o in order]
+    colors = [palette.color(o) for o in order]
     ax.bar([str(o) for o in order], [np.quantile(f, 0.5, method="lower") for f in finals], color=colors, alpha=0.5)
     for k, f in enumerate(finals):
         ax.plot(np.full(len(f), k) + np.linspace(-0.15, 0.15, len(f)), f, "o", ms=4, color="black")
@@ -118,11 +83,9 @@ def final_bars(runs: pd.DataFrame, order=None, ax=None, title=None):
     return ax
 
 
-def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=None, title=None, ylabel=None,
-                   colors: dict | None = None):
+def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=None, title=None, ylabel=None):
     """IQM over seeds of ``metric`` ("steps" or "final") with its 95% interval, per curve,
-    against a layout parameter ``x`` (indexed by layout). ``table``: ``layout_study.table``;
-    ``colors``: label -> colour, so that a curve keeps its colour across panels."""
+    against a layout parameter ``x`` (indexed by layout). ``table``: ``layout_study.table``."""
     ax = ax or plt.subplots(figsize=(5, 4))[1]
     x = x.dropna()
     order = sorted(x.index, key=lambda name: x[name])
@@ -132,7 +95,7 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
         mid, low, high = (rows[f"{metric}_{c}"].to_numpy(float) for c in ("iqm", "low", "high"))
         shift = (k - (len(labels) - 1) / 2) * 0.08  # side by side, so overlapping intervals stay readable
         ax.errorbar(ticks + shift, mid, yerr=[mid - np.fmin(low, mid), np.fmax(high, mid) - mid], marker="o",
-                    capsize=3, label=str(label), color=(colors or {}).get(label) or color_of(label))
+                    capsize=3, label=str(label), color=palette.color(label))
     ax.set_xticks(ticks, [f"{x[name]:g}" if isinstance(x[name], float) else str(x[name]) for name in order])
     ax.set(title=title, ylabel=ylabel)
     return ax
@@ -150,7 +113,7 @@ def across_shares(df: pd.DataFrame, order=None, ax=None, title=None):
     for label in order:
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values="across_share")
         ax.plot(runs.index, np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower"), lw=2, label=str(label),
-                color=color_of(label, order))
+                color=palette.color(label))
     ax.xaxis.set_major_formatter(STEPS)
     ax.set(xlabel="environment steps", ylabel="weight on other\nnetworks' seats", ylim=(-0.02, None),
            title=title or "reuse across networks (median over seeds)")
@@ -256,7 +219,7 @@ def episode_animation(maze, trajectories: dict, title: str | None = None, interv
     episode that ended earlier stays on its last step), so there are as many frames as the longest
     trajectory has steps. Every agent is a disc in its colour (``AGENT_COLORS``) with the path it
     has walked so far as a thin line; the seats are drawn slightly apart, so agents on one cell
-    stay visible. Each panel's title (in the label's colour, ``color_of``) counts the steps and
+    stay visible. Each panel's title (in the label's colour, ``palette.color``) counts the steps and
     says how many agents are on the star.
 
     The figure is not pyplot's, so nothing is shown twice in a notebook. Its ``to_jshtml()``
@@ -330,7 +293,7 @@ def episode_animation(maze, trajectories: dict, title: str | None = None, interv
                 discs[seat].set_data([cols[-1]], [rows[-1]])
             arrived = (rc[s] == star).all(axis=1)
             note = "every agent on the star" if arrived.all() else f"{int(arrived.sum())} of {n} on the star"
-            ax.set_title(f"{label}\nstep {s} of {len(rc) - 1}: {note}", fontsize=10, color=color_of(label) or "black")
+            ax.set_title(f"{label}\nstep {s} of {len(rc) - 1}: {note}", fontsize=10, color=palette.color(label))
             artists += [*trails, *discs, ax.title]
         return artists
 

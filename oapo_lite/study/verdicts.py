@@ -31,11 +31,26 @@ from oapo_lite.study.statistics import Interval, bootstrap_interval, iqm, probab
 
 THRESHOLD = 0.95
 FINAL_TIE = 0.02  # final fractions closer than this count as a tie, decided by speed
-REPRODUCED, DIRECTION, NOT = "reproduced", "direction only (within noise)", "not reproduced"
-CONTRADICTED, NOT_TESTABLE = "contradicted", "not testable at this budget"
+# The statuses of a verdict: the one vocabulary of every table, summary and notebook (``STATUSES``)
+REPRODUCED, WITHIN_NOISE, NOT = "reproduced", "within noise", "not reproduced"
+CONTRADICTED, NOT_TESTABLE, NOT_RUN = "contradicted", "not testable at this budget", "not run"
 NOT_REUSE = "not a test of reuse"
+NO_RUN = "no run of this env on disk at this budget"  # the reason of ``NOT_RUN``
 INTERVAL_ALONE = "by the interval alone"  # what the interval read, beside a status that says what the runs tested
 SHARING = "a test of sharing"  # a reading whose seats share networks, where reuse across them hardly operated
+# what each status means, in one line (the README's list; the rule in full is ``RULE``)
+STATUSES = {
+    REPRODUCED: "the whole 95% interval is on the paper's side",
+    WITHIN_NOISE: "the point estimate is on the paper's side, the interval is not",
+    NOT: "the point estimate is not on the paper's side",
+    CONTRADICTED: "the whole 95% interval is on the other side",
+    NOT_REUSE: "OAPPO / OATRPO hardly reused other networks' experience while it learned, so the claim says nothing "
+               "about reuse (the interval's reading is given beside it)",
+    SHARING: "the OAPPO reading shares networks between seats and hardly reused across them, so the claim tests "
+             "parameter sharing (the interval's reading is given beside it)",
+    NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
+    NOT_RUN: "the env has no run on disk at this budget (not trained yet, or only at `paper`, a cluster's job)",
+}
 # a curve reusing by Eq. 9 tests reuse when some peer weight was given at this share of its
 # evaluated iterations while it learned (issue 31's share for "the gate operates")
 REUSE_PART = 0.25
@@ -356,7 +371,7 @@ RULE = f"""How a verdict is decided (oapo_lite.study.verdicts), in this order:
    P(a better than b) (or of the final IQM, for "stays below" / "reaches"; of the share of seeds
    that reached the threshold minus the other curve's, for "as reliably") is on the claimed
    side of 0.5 (of the threshold; of 0, a tie included), contradicted when it is wholly on the
-   other side, direction only when just the point estimate is on the claimed side,
+   other side, within noise when just the point estimate is on the claimed side,
    not reproduced otherwise. "Faster" reads the steps to the threshold alone: a seed that never
    got there counts at the budget, behind every seed that did."""
 
@@ -374,7 +389,7 @@ class Verdict:
         return self.status == REPRODUCED
 
     def sentence(self) -> str:
-        if self.status == NOT_TESTABLE:
+        if self.status in (NOT_TESTABLE, NOT_RUN):
             return f"{self.claim}: {self.status}: {self.reason}"
         return f"{self.claim}: {self.status} ({self.reason}). {self.evidence}"
 
@@ -388,12 +403,12 @@ def _side(est: Interval, value: float, claimed_above: bool) -> str:
         return REPRODUCED
     if high < 0:
         return CONTRADICTED
-    return DIRECTION if sign * (est.point - value) > 0 else NOT
+    return WITHIN_NOISE if sign * (est.point - value) > 0 else NOT
 
 
 def _reason(status: str, estimate: str, side: str, value: float) -> str:
     where = {REPRODUCED: f"wholly {side}", CONTRADICTED: f"wholly on the other side of {value:g}",
-             DIRECTION: f"point estimate {side}, interval across {value:g}", NOT: f"point estimate not {side}"}
+             WITHIN_NOISE: f"point estimate {side}, interval across {value:g}", NOT: f"point estimate not {side}"}
     return f"{estimate}: {where[status]}"
 
 
@@ -429,7 +444,7 @@ def reliable(ev: Evidence, a, b, claim: str) -> Verdict:
     that reached it minus ``b``'s, with its 95% interval, read against 0 (a tie holds)."""
     s, reach = ev.summary, ev.metric.reach.format(ev.threshold)
     d = bootstrap_interval(_share_difference, ev.run_values(a, "reached"), ev.run_values(b, "reached"))
-    status = (REPRODUCED if d.low >= 0 else CONTRADICTED if d.high < 0 else DIRECTION if d.point >= 0 else NOT)
+    status = (REPRODUCED if d.low >= 0 else CONTRADICTED if d.high < 0 else WITHIN_NOISE if d.point >= 0 else NOT)
     estimate = f"share reached, {a} minus {b}: {d.fmt()}"
     return Verdict(claim, status, f"seeds that reached {reach}: {a} {s.loc[a, 'reached']}/{s.loc[a, 'seeds']} vs {b} "
                                   f"{s.loc[b, 'reached']}/{s.loc[b, 'seeds']}; difference of shares {d.fmt()}.",
@@ -489,7 +504,7 @@ def _single(ev: Evidence, a, claim: str, below: bool) -> Verdict:
     if below:  # "stuck": the whole interval below the threshold
         status, side = _side(est, thr, False), f"below {thr:g}"
     else:  # "optimal": the whole interval at or above it
-        status = REPRODUCED if est.low >= thr else CONTRADICTED if est.high < thr else DIRECTION if est.point >= thr else NOT
+        status = REPRODUCED if est.low >= thr else CONTRADICTED if est.high < thr else WITHIN_NOISE if est.point >= thr else NOT
         side = f"at or above {thr:g}"
     return Verdict(claim, status,
                    f"{ev.metric.final}, IQM [95% CI]: {_fmt_final(ev, a)}; {s.loc[a, 'reached']} of "
@@ -541,10 +556,8 @@ def why_not_learned(ev: Evidence, label) -> str:
             f"{'; '.join(_learning_failures(ev, label))})")
 
 
-def _undecidable(ev: Evidence | None, test, labels) -> str | None:
+def _undecidable(ev: Evidence, test, labels) -> str | None:
     """Why the data cannot decide a claim about ``labels``, or None if it can."""
-    if ev is None:
-        return "no run of this env on disk at this budget"
     s, m = ev.summary, ev.metric
     few = [f"{x} ({int(s.loc[x, 'seeds']) if x in s.index else 0})" for x in labels
            if x not in s.index or s.loc[x, "seeds"] < 2]
@@ -583,6 +596,8 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     """``test(ev, *labels, claim)`` if the data can decide it (``RULE``, step 1), else a
     ``NOT_TESTABLE`` verdict saying why: for claims a notebook makes beyond the grid's. A claim
     that cannot test reuse (step 2) keeps the test's evidence under ``NOT_REUSE``."""
+    if ev is None:
+        return Verdict(claim, NOT_RUN, "", "", NO_RUN)
     why = _undecidable(ev, test, labels)
     if why:
         return Verdict(claim, NOT_TESTABLE, "", "", why)

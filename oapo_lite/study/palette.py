@@ -1,0 +1,56 @@
+"""One colour per curve, in every figure and inline plot: the palette's one table.
+
+A curve keeps its colour wherever it is drawn, and two curves never share one: algorithms,
+OAPPO's readings and settings, the reuse schemes of Fig. 5b and the values of Fig. 3c's sigma
+and Fig. 3d's lambda each have their own. The mazes' agents are named after their colours (red,
+black, blue), so no curve is red, black or blue. A label the table lacks is an error, not a
+colour picked by matplotlib: a new curve gets a row here.
+"""
+from __future__ import annotations
+
+# sigma and lambda at the paper's values (0.1, 0.7) are OAPPO itself, and drawn as it is
+OAPPO = "#2ca02c"
+PALETTE = {
+    # the algorithms
+    "oappo": OAPPO, "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b", "hatrpo": "#e377c2",
+    "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
+    # OAPPO's readings of the networks and its gate statistics
+    "oappo one seat": "#98df8a", "oappo type": "#1b7f79",
+    "oappo agent max": "#005a32", "oappo agent mean": "#41ab5d", "oappo agent q90": "#a1d99b",
+    "oappo type max": "#08519c", "oappo type mean": "#6baed6", "oappo type q90": "#9ecae1",
+    # the selection ablation: gated reuse, always-on reuse, and per kind within its kind only
+    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own kind": "#7fb8b3",
+    # OAPPO's variants
+    "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
+    "oappo entropy x W[i,i]": "#5254a3",
+    # Fig. 3c's sigma and Fig. 3d's lambda (the paper's values are OAPPO's)
+    "sigma = 0.01": "#fdae6b", "sigma = 0.1": OAPPO, "sigma = 1": "#e6550d", "sigma = 10": "#843c39",
+    "lambda = 0.2": "#756bb1", "lambda = 0.4": "#9e9ac8", "lambda = 0.7": OAPPO, "lambda = 1": "#c49c94",
+    # Fig. 5b's reuse schemes
+    "NR": "#636363", "UR": "#ce6dbd", "RR": "#3182bd", "AR": "#fd8d3c",
+    # HAPPO's settings on HalfCheetah, and the one-agent control
+    "happo clip 0.05": "#bd9e39", "happo 15 epochs": "#8c6d31", "happo 128x3": "#e7ba52", "happo feature norm": "#7b4173",
+    "happo 20 x 200": "#a55194", "happo HARL": "#393b79", "happo normalized": "#de9ed6", "ppo one agent": "#969696",
+}
+# what is not a curve: the mazes' agents (named after their colours) and Fig. 1's reused and omitted peers
+AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
+REUSED, OMITTED = "#e6a100", "#9a9a9a"
+# other names of a curve in the table (the same runs drawn in another figure)
+ALIASES = {"oappo lambda=0.4": "lambda = 0.4", "oappo lambda=1": "lambda = 1", "oappo lambda=0.2": "lambda = 0.2",
+           "happo two legs": "happo"}
+
+
+def name(label) -> str:
+    """The table's name of a curve label: a sigma or lambda sweep's value as "sigma = 0.1" (its
+    float label is named by the caller, who knows which sweep), an alias as its curve."""
+    text = str(label).strip()
+    return ALIASES.get(text, text)
+
+
+def color(label) -> str:
+    """The colour of curve ``label`` (any case)."""
+    key = name(label)
+    for candidate in (key, key.lower()):
+        if candidate in PALETTE:
+            return PALETTE[candidate]
+    raise ValueError(f"no colour for the curve {label!r}; add it to oapo_lite.study.palette.PALETTE")
