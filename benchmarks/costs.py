@@ -73,7 +73,7 @@ def main() -> int:
     for k, (key, cfg) in enumerate(todo.items(), 1):
         tic = time.perf_counter()
         price = measure(cfg)
-        rows.append(pd.DataFrame([{**dict(zip(KEY, key)), **price, **machine(), "git_rev": git_revision()[:12]}]))
+        rows.append(pd.DataFrame([{**dict(zip(KEY, key)), **price, **machine(), "git_rev": git_revision()[:12]}], dtype=str))
         write_frame(pd.concat(rows, ignore_index=True), COSTS)
         print(f"[{k}/{len(todo)}] {' '.join(key[:4])} {key[6]}x{key[7]}: {price['cpu_per_kstep']:.3f} CPU-s per "
               f"1,000 steps ({time.perf_counter() - tic:.0f} s)", flush=True)

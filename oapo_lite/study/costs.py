@@ -147,14 +147,16 @@ def _hours(h: float, unpriced: int) -> str:
 
 
 def _wall(hours: float) -> str:
-    return f"{hours * 60:.0f} minutes" if hours < 2 else f"{hours:.1f} hours"
+    minutes = max(1, round(hours * 60))
+    return f"{minutes} minute{'s' * (minutes > 1)}" if hours < 2 else f"{hours:.1f} hours"
 
 
 def _machines() -> str:
     if not COSTS.exists():
         return "no machine (no table)"
-    df = pd.read_csv(COSTS, dtype=str)
-    return "; ".join(f"{m} ({c} cores)" for m, c in df[["cpu_model", "cpu_count"]].drop_duplicates().itertuples(index=False))
+    df = pd.read_csv(COSTS)
+    machines = sorted({(m, int(c)) for m, c in zip(df["cpu_model"], df["cpu_count"])})
+    return "; ".join(f"{m} ({c} cores)" for m, c in machines)
 
 
 def main_plan(budget: str, figures, workers: int) -> str:
@@ -179,8 +181,8 @@ def readme_markdown() -> str:
     for b, (_, total, wall) in per_budget.items():
         rest = f", {total.unpriced} runs without a measured cost left out" if total.unpriced else ""
         sentences.append(f"- `{b}`: {total.runs} runs, {_steps(total.steps)} env steps, about "
-                         f"{total.cpu_hours:,.1f} CPU hours from nothing: {_wall(wall)} on {README_WORKERS} workers "
-                         f"of this kind of machine{rest}.")
+                         f"{total.cpu_hours:,.{2 if total.cpu_hours < 10 else 1}f} CPU hours from nothing: {_wall(wall)} "
+                         f"on {README_WORKERS} workers of this kind of machine{rest}.")
     table_text = "\n".join(["| figure | " + " | ".join(f"`{b}`: runs, env steps, CPU hours" for b in README_BUDGETS) + " |",
                             "| --- |" + " --- |" * len(README_BUDGETS)]
                            + ["| " + " | ".join(r) + " |" for r in rows])
