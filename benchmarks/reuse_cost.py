@@ -1,7 +1,7 @@
 """What OAPPO's reuse costs against HAPPO's, side by side in one process, on 2s3z (Fig. 4's
 settings) and HalfCheetah 2x3 (App. A's): CPU seconds per 1,000 env steps of the whole loop and
-of its learning, their ratio to HAPPO's, and the sources a learner trains on (samples of seats
-with a positive weight in M, per learner and iteration: HAPPO 1).
+its ratio to HAPPO's, learning's share of the loop's time, and the sources a learner trains on
+(seats with a positive weight in M, per learner and iteration: HAPPO 1).
 
 In Eq. 8's weights mode a learner evaluates and differentiates its network on the samples of
 every source it reuses, so its learning grows with that count; the "sample" reading (Algorithm
@@ -38,17 +38,19 @@ READINGS = {  # label of the figure's curve, and what changes from it
 
 
 def measure(cfg) -> dict:
+    """CPU seconds per 1,000 env steps of ``train(cfg)`` (this process), of its learning, and the
+    sources a learner trains on, per learner and iteration."""
     with tempfile.TemporaryDirectory() as out:
+        train(dataclasses.replace(cfg, steps=cfg.iteration_steps), out + "/warm", progress=False)  # builds the env
         timing = {}
-        tic = time.process_time()
-        rows = train(cfg, out, progress=False, timing=timing)
-        cpu = time.process_time() - tic
-        history = load_history(out)
-    steps = cfg.steps
-    sources = [np.count_nonzero(h["reuse_matrix"] > 0, axis=1).mean() for h in history if "reuse_matrix" in h]
-    loop = rows["cpu_s"].iloc[-1] - rows["cpu_s"].iloc[0]  # the record: less building the envs and the first evaluation
-    return {"loop": 1000 * loop / steps, "learn": 1000 * timing["learn"] / steps, "total": 1000 * cpu / steps,
-            "sources": float(np.mean(sources)) if sources else 1.0}
+        tic, wall = time.process_time(), time.perf_counter()
+        train(cfg, out + "/run", progress=False, timing=timing)
+        cpu, wall = time.process_time() - tic, time.perf_counter() - wall
+        history = load_history(out + "/run")
+    sources = [np.count_nonzero(np.asarray(h["reuse_matrix"]) > 0, axis=1).mean() for h in history
+               if "reuse_matrix" in h]
+    return {"loop": 1000 * cpu / cfg.steps, "learn": timing["learn"] / wall,
+            "sources": float(np.mean(sources)) if sources and cfg.reuse_mode == "weights" else np.nan}
 
 
 def main() -> None:
@@ -58,8 +60,8 @@ def main() -> None:
     args = parser.parse_args()
     warm_up()
     for env in args.envs:
-        print(f"\n{env}: CPU-s per 1,000 env steps (loop: the run's own record, less building the envs and the first "
-              "evaluation; learn: the learner's share of it), ratio to HAPPO's first run")
+        print(f"\n{env}: CPU seconds per 1,000 env steps of the whole loop (the env built before), against "
+              "HAPPO's first run")
         base = None
         for name, (label, change) in READINGS.items():
             if label not in {r.label for r in grid.runs_of(FIGURE[env], "cpu")}:
@@ -68,8 +70,9 @@ def main() -> None:
             cfg = dataclasses.replace(cfg, steps=args.periods * cfg.eval_every * cfg.iteration_steps, **change)
             m = measure(cfg)
             base = base or m
-            print(f"  {name:44s} loop {m['loop']:.3f} ({m['loop'] / base['loop']:.2f}x)  learn {m['learn']:.3f} "
-                  f"({m['learn'] / base['learn']:.2f}x)  sources per learner {m['sources']:.2f}", flush=True)
+            sources = "one drawn from M" if np.isnan(m["sources"]) else f"{m['sources']:.2f}"
+            print(f"  {name:44s} {m['loop']:.3f} CPU-s ({m['loop'] / base['loop']:.2f}x HAPPO's), learning "
+                  f"{m['learn']:.0%} of the loop's time, sources per learner {sources}", flush=True)
 
 
 if __name__ == "__main__":

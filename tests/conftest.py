@@ -8,7 +8,7 @@ Every test module also says whether its outcome can depend on the floating-point
 runs only the first kind again under its other kernels (``pytest -m numeric``)."""
 import pytest
 
-NUMERIC = {"test_adaptive", "test_claims", "test_divergence", "test_envs", "test_exact", "test_gate_study",
+NUMERIC = {"test_adaptive", "test_assumptions", "test_claims", "test_divergence", "test_envs", "test_exact", "test_gate_study",
            "test_layout_study", "test_losses", "test_mamujoco", "test_normalize", "test_reuse", "test_rollout", "test_seac_seps",
            "test_smax", "test_tabular", "test_train", "test_trpo", "test_verdicts"}
 NOT_NUMERIC = {"test_bad_input_and_damage", "test_book", "test_costs", "test_experiments", "test_grf", "test_interactive",

@@ -89,7 +89,7 @@ def _figure_curves(figure) -> list[str]:
 def test_two_curves_of_a_figure_never_share_a_colour_and_a_curve_keeps_its_own():
     from oapo_lite.study import grid
 
-    tuning = ("fig_sweep_2s3z", "fig_a2c_smax")  # drawn as tables, a row per setting
+    tuning = ("fig_sweep_2s3z", "fig_a2c_smax", "fig_a2c_2s3z")  # drawn as tables, a row per setting
     for figure in (f for f in grid.GRID if f.id not in tuning):
         names = list(dict.fromkeys(_figure_curves(figure)))
         colours = [palette.color(n) for n in names]  # every curve has one: a missing one raises

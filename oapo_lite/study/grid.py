@@ -461,6 +461,13 @@ GRID = (
            common=dict(SMAX_BATCH, env="smax:3m"), runs_at=("cpu",),
            budgets={"cpu": dict(seeds=(0, 1), steps=300_000, eval_every=10, eval_episodes=64)},
            metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
+    # SEAC's and SePS's settings swept again on 2s3z, where at their 3m sweep's choice they stay at
+    # a 0 win rate: whether other settings let them learn there, and what their losses and entropy say
+    Figure("fig_a2c_2s3z", tuple((f"{a} lr={lr:g} ent={ent:g}", dict(algo=a, a2c_lr=lr, entropy_coef=ent))
+                                 for a in ("seac", "seps") for lr in A2C_LRS for ent in A2C_ENTROPIES),
+           common=dict(SMAX_BATCH, env="smax:2s3z"), runs_at=("cpu",),
+           budgets={"cpu": dict(seeds=(0, 1), steps=300_000, eval_every=10, eval_episodes=64)},
+           metric=WIN_RATE, section="6.2", notebook="20_smax_fig4"),
     Figure("fig_mamujoco_settings", (("happo", dict(algo="happo")),
                                      *((f"happo {name}", dict(algo="happo", **kw)) for name, kw in HARL_HALFCHEETAH.items()),
                                      ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()

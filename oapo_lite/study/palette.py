@@ -31,6 +31,7 @@ PALETTE = {
     # HAPPO's settings on HalfCheetah, and the one-agent control
     "happo clip 0.05": "#bd9e39", "happo 15 epochs": "#8c6d31", "happo 128x3": "#e7ba52", "happo feature norm": "#7b4173",
     "happo 20 x 200": "#a55194", "happo HARL": "#393b79", "happo normalized": "#de9ed6", "ppo one agent": "#969696",
+    "sb3 ppo (one agent)": "#525252",
 }
 # what is not a curve: the mazes' agents (named after their colours) and Fig. 1's reused and omitted peers
 AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}

@@ -17,12 +17,14 @@ YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arri
 STEPS = FuncFormatter(lambda x, _: f"{x / 1e6:g}M" if abs(x) >= 1e6 else f"{x / 1e3:g}k" if x else "0")
 
 
-def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None):
+def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None,
+                    legend: dict | None = None):
     """Fig. 3b-d, 4, App. A: every seed as a thin line (on top) and, bold, the median over seeds
     of ``y`` against env steps (the lower middle seed where the count is even, so at every step
     a level some seed reached). Not mean +- std, nor an IQM: outcomes that split into trapped
     and optimal seeds have a mean that describes no run and a band that leaves the possible
-    range. The title gets a line saying so. Each curve in its colour (``palette.color``)."""
+    range. The title gets a line saying so. Each curve in its colour (``palette.color``), named
+    in the legend by ``legend[label]`` where given (e.g. with its seed count)."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     ax = ax or plt.subplots(figsize=(6, 4))[1]
@@ -48,7 +50,7 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
             raise ValueError(f"curve {label!r} has no value of {y!r} to draw (every evaluation is empty)")
         color = palette.color(label)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
-        line, = ax.plot(runs.index, median, lw=2.2, label=str(label), color=color, zorder=2)
+        line, = ax.plot(runs.index, median, lw=2.2, label=str((legend or {}).get(label, label)), color=color, zorder=2)
         seeds_of[label] = (runs, line.get_color())
     for runs, color in seeds_of.values():
         ax.plot(runs.index, runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3)
