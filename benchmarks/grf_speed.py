@@ -43,7 +43,7 @@ from oapo_lite.envs import grf
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.runstate import RunState
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 from loops import cut_short, profile, warm_up
 
@@ -141,9 +141,9 @@ def speed(scenario: str, algos: list[str], iterations: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    scenarios = [env.removeprefix("grf:") for env in grid.get_figure("fig6b").envs("cpu")]
+    scenarios = [env.removeprefix("grf:") for env in figures.get_figure("fig6b").envs("cpu")]
     parser.add_argument("--scenario", default=scenarios[0], choices=scenarios, help="a scenario with runs at the cpu budget")
-    parser.add_argument("--algos", nargs="+", default=["oappo", "happo", "mappo"], choices=grid.FIG6B_ALGOS)
+    parser.add_argument("--algos", nargs="+", default=["oappo", "happo", "mappo"], choices=figures.grf.FIG6B_ALGOS)
     parser.add_argument("--iterations", type=int, default=4)
     args = parser.parse_args()
     if args.iterations < 1:

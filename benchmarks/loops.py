@@ -12,13 +12,13 @@ import tempfile
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 
 def cut_short(figure: str, budget: str, algo: str, env: str, iterations: int) -> TrainConfig:
     """Seed 0's config of curve ``algo`` of ``figure`` at ``budget`` on ``env`` (the figure's
     first env's, moved to ``env``, where the figure has no run there), cut to ``iterations``."""
-    runs = [r.cfg for r in grid.runs_of(figure, budget) if r.label == algo and r.cfg.seed == 0]
+    runs = [r.cfg for r in figures.runs_of(figure, budget) if r.label == algo and r.cfg.seed == 0]
     cfg = next((c for c in runs if c.env == env), runs[0])
     return dataclasses.replace(cfg, env=env, steps=iterations * cfg.iteration_steps)
 

@@ -11,7 +11,7 @@ import statistics
 import tempfile
 import time
 
-from oapo_lite.study import executors, grid
+from oapo_lite.study import executors, figures
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--cpus", type=int, default=2)
@@ -45,7 +45,7 @@ with tempfile.TemporaryDirectory(prefix="oapo-ray-") as temp:
         batch = seconds(lambda: ray.get([task.remote(i) for i in range(args.tasks)]))
         print(f"empty tasks, {args.tasks} submitted at once:             {1e3 * batch / args.tasks:7.2f} ms each")
 
-        (run,) = grid.runs_of("fig1", "smoke")
+        (run,) = figures.runs_of("fig1", "smoke")
         job = ray.remote(executors._ray_job).options(num_cpus=1)
         local, remote = [], []
         for k in range(args.repeats + 1):  # the first of each is a cold start (a fresh worker imports torch)

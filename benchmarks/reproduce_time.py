@@ -1,6 +1,6 @@
 """Wall time of the whole maze reproduction at a budget (default: paper), from nothing.
 
-Runs `python -m oapo_lite reproduce` on the maze figures (`grid.MAZE_FIGURES`; the
+Runs `python -m oapo_lite reproduce` on the maze figures (`figures.MAZE_FIGURES`; the
 real engines' paper runs are a cluster's work) with every result written to a fresh
 temporary folder (OAPO_FIGURES) that holds a copy of the committed results less the runs
 timed, so those are trained from nothing, the notebooks find the other budgets' runs they
@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from oapo_lite.study import experiments
-from oapo_lite.study.grid import MAZE_FIGURES
+from oapo_lite.study.figures import MAZE_FIGURES
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")

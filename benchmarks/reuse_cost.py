@@ -21,7 +21,7 @@ import numpy as np
 
 from oapo_lite.neural.runstate import load_history
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 from loops import cut_short, warm_up
 
@@ -64,7 +64,7 @@ def main() -> None:
               "HAPPO's first run")
         base = None
         for name, (label, change) in READINGS.items():
-            if label not in {r.label for r in grid.runs_of(FIGURE[env], "cpu")}:
+            if label not in {r.label for r in figures.runs_of(FIGURE[env], "cpu")}:
                 continue
             cfg = cut_short(FIGURE[env], "cpu", label, env, 1)
             cfg = dataclasses.replace(cfg, steps=args.periods * cfg.eval_every * cfg.iteration_steps, **change)

@@ -23,14 +23,14 @@ from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.results import COST
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 # one short run shape per engine: enough iterations for an evaluation, a checkpoint and, for
 # OAPPO, Eq. 9's weights to act; SePS's pre-training ends inside the run
 ENVS = {"black_red": dict(n_envs=8, rollout_len=25, max_steps=50),
         "smax:3m": dict(n_envs=4, rollout_len=20, max_steps=60),
         "mamujoco:HalfCheetah-2x3": dict(n_envs=2, rollout_len=25, max_steps=50),
-        f"grf:academy_{grid.GRF_SCENARIOS[1]}": dict(n_envs=2, rollout_len=20, max_steps=60)}
+        f"grf:academy_{figures.grf.GRF_SCENARIOS[1]}": dict(n_envs=2, rollout_len=20, max_steps=60)}
 ITERATIONS = 4
 # readings beyond an algorithm's defaults that take other paths through the update
 VARIANTS = {"oappo type": dict(networks="type", kl_reduce="mean"), "oappo one seat": dict(networks="one", update_by="seat"),

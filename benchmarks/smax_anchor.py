@@ -9,7 +9,7 @@ Our side (this script)::
     .venv/bin/python benchmarks/smax_anchor.py --map 2s3z --seeds 0 1 2        # 500k steps
     .venv/bin/python benchmarks/smax_anchor.py --map 3m --settings defaults    # TrainConfig's (HARL's) defaults
 
-trains MAPPO with ``grid.SMAX_TUNED`` (Fig. 4's settings; or TrainConfig's defaults) at Fig. 4's batch shape
+trains MAPPO with ``figures.smax.SMAX_TUNED`` (Fig. 4's settings; or TrainConfig's defaults) at Fig. 4's batch shape
 into a temporary folder and prints, per seed, the evaluation win rate (64 battles, stochastic
 policy) at every evaluation and the CPU seconds per 1,000 env steps (this process, all threads,
 JAX compile included).
@@ -58,17 +58,17 @@ import time
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 STEPS = {"3m": 300_000, "2s3z": 500_000}
 
 
 def config(map_name: str, seed: int, settings: str = "tuned", algo: str = "mappo") -> TrainConfig:
     """MAPPO (or ``algo``) on ``map_name`` at Fig. 4's batch shape, evaluated every ~32k steps
-    on 64 battles, with ``grid.SMAX_TUNED`` or TrainConfig's defaults."""
-    kw = dict(grid.SMAX_BATCH)
+    on 64 battles, with ``figures.smax.SMAX_TUNED`` or TrainConfig's defaults."""
+    kw = dict(figures.smax.SMAX_BATCH)
     if settings == "tuned":
-        kw.update(grid.SMAX_TUNED)
+        kw.update(figures.smax.SMAX_TUNED)
     every = max(1, round(32_000 / (kw["n_envs"] * kw["rollout_len"])))
     return TrainConfig(algo=algo, env=f"smax:{map_name}", seed=seed, steps=STEPS.get(map_name, 1_000_000),
                        eval_every=every, eval_episodes=64, **kw)
@@ -76,7 +76,7 @@ def config(map_name: str, seed: int, settings: str = "tuned", algo: str = "mappo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", default="3m", choices=grid.FIG4_MAPS)
+    ap.add_argument("--map", default="3m", choices=figures.smax.FIG4_MAPS)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--algo", default="mappo")
     ap.add_argument("--settings", default="tuned", choices=["tuned", "defaults"])

@@ -24,7 +24,7 @@ import numpy as np
 from oapo_lite.envs.smax import SmaxVec
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import grid
+from oapo_lite.study import figures
 
 from loops import cut_short, profile
 
@@ -87,13 +87,13 @@ def project_grid(iterations: int) -> None:
     short run evaluates twice, more often than a full one: the projection errs high)."""
     total = 0.0
     print(f"{'map':<24} {'algo':<7} {'CPU s/1k':>9} {'runs':>5} {'steps':>9} {'CPU h':>6}")
-    fig = grid.get_figure("fig4_smax")
+    fig = figures.get_figure("fig4_smax")
     for env in fig.envs("cpu"):
         map_name, b = env.removeprefix("smax:"), fig.budget("cpu", env)
         seeds, steps = len(b.seeds), b.steps
         base = config(map_name, "oappo", iterations)
         SmaxVec(map_name, base.n_envs, 0, base.max_steps)  # compile outside the measurement
-        for algo in grid.SMAX_ALGOS:
+        for algo in figures.smax.SMAX_ALGOS:
             cpu = loop(config(map_name, algo, iterations))["cpu_per_kstep"]
             hours = cpu * steps / 1000 * seeds / 3600
             total += hours
@@ -103,8 +103,8 @@ def project_grid(iterations: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--map", default="3m", choices=grid.FIG4_MAPS)
-    parser.add_argument("--algos", nargs="+", default=list(grid.SMAX_ALGOS))
+    parser.add_argument("--map", default="3m", choices=figures.smax.FIG4_MAPS)
+    parser.add_argument("--algos", nargs="+", default=list(figures.smax.SMAX_ALGOS))
     parser.add_argument("--iterations", type=int, default=6)
     parser.add_argument("--grid", action="store_true", help="project the cpu budget's CPU hours instead")
     args = parser.parse_args()

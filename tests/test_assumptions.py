@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oapo_lite.study import experiments, grid, verdicts
+from oapo_lite.study import experiments, figures, verdicts
 from oapo_lite.study.statistics import iqm
 
 ASSUMPTIONS = Path(__file__).resolve().parents[1] / "ASSUMPTIONS.md"
@@ -37,7 +37,7 @@ def metric_rows(figure: str, budget: str, env: str | None = None):
     """A figure's rows with the metric's columns alone: without the env and algorithm columns
     ``verdicts.per_run`` does not ask the engine for the seats' networks (importing SMAX or
     MuJoCo), which no final level or step count depends on."""
-    column, df = grid.get_figure(figure).metric.column, load(figure, budget)
+    column, df = figures.get_figure(figure).metric.column, load(figure, budget)
     return df.loc[df["env"] == env if env else slice(None), ["label", "seed", "step", column]]
 
 
@@ -45,7 +45,7 @@ def evidence(figure: str, budget: str, env: str | None = None) -> verdicts.Evide
     df = load(figure, budget)
     if env is not None:
         df = df[df["env"] == env]
-    return verdicts.Evidence(df, metric=grid.get_figure(figure).metric)
+    return verdicts.Evidence(df, metric=figures.get_figure(figure).metric)
 
 
 def quoted(expected: str) -> None:
@@ -75,7 +75,7 @@ def finals(figure: str, budget: str, env: str) -> dict:
     """Per curve on ``env``, the final IQM a verdict reads (``Evidence.level(label, "final")``'s
     point), from the metric's columns alone: the seats' networks, which need the engine, do not
     enter a final level."""
-    metric = grid.get_figure(figure).metric
+    metric = figures.get_figure(figure).metric
     runs = verdicts.per_run(metric_rows(figure, budget, env), metric.threshold, tail=metric.tail, y=metric.column)
     return {label: float(iqm(part["final"].to_numpy())) for label, part in runs.groupby("label", sort=False)}
 
@@ -92,19 +92,19 @@ def test_fig4_final_levels():
 
 
 def _sweep(figure: str):
-    family = {label: re.split(r" lr=", label)[0] for label, _ in grid.get_figure(figure).curves}
+    family = {label: re.split(r" lr=", label)[0] for label, _ in figures.get_figure(figure).curves}
     return verdicts.sweep_table(metric_rows(figure, "cpu"), family, verdicts.WIN_RATE)
 
 
 def test_sweep_on_2s3z():
     t = _sweep("fig_sweep_2s3z")
     lrs = {5e-4: "5e-4", 1e-3: "1e-3", 2e-3: "2e-3"}
-    for family, (lr, ent, clip) in grid.SWEEP_CHOSEN.items():
+    for family, (lr, ent, clip) in figures.smax.SWEEP_CHOSEN.items():
         rows = t[t["family"] == family]
         final = {label: rows.loc[label, "final"] for label in rows.index}
         grid_cells = " | ".join(f"{final[f'{family} lr={x:g} ent=0']:.3f} / {final[f'{family} lr={x:g} ent=0.01']:.3f}"
-                                for x in grid.SWEEP_LRS)
-        clips = " / ".join(f"{final[f'{family} lr={lr:g} ent={ent:g} clip={c:g}']:.3f}" for c in grid.SWEEP_CLIPS)
+                                for x in figures.smax.SWEEP_LRS)
+        clips = " / ".join(f"{final[f'{family} lr={lr:g} ent={ent:g} clip={c:g}']:.3f}" for c in figures.smax.SWEEP_CLIPS)
         chosen = rows[rows["chosen"]]
         assert list(chosen.index) == [f"{family} lr={lr:g} ent={ent:g}"], f"{family}: the rule chose {list(chosen.index)}"
         steps = chosen["steps"].iloc[0]
@@ -123,7 +123,7 @@ def test_a2c_sweep_on_3m():
 
 def test_entropy_weight():
     ev = verdicts.Evidence(metric_rows("fig_entropy_weight", "paper"))
-    weighted = grid.get_figure("fig_entropy_weight").curves[1][0]
+    weighted = figures.get_figure("fig_entropy_weight").curves[1][0]
     p = ev.improvement(weighted, "oappo", "steps")
     quoted(f"steps to 95% IQM {ev.level('oappo', 'steps').point:,.0f} unweighted against "
            f"{ev.level(weighted, 'steps').point:,.0f} weighted, P(weighted faster) {p.fmt('.2f')}")

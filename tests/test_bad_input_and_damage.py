@@ -27,7 +27,7 @@ from oapo_lite.neural.losses import Diverged
 from oapo_lite.neural.results import learning
 from oapo_lite.neural.runstate import RunState, load_checkpoint
 from oapo_lite.neural.train import _diverged_at, train
-from oapo_lite.study import experiments, grid, plotting, statistics, verdicts
+from oapo_lite.study import experiments, figures, plotting, statistics, verdicts
 from oapo_lite.study.executors import train_job
 
 QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
@@ -260,7 +260,7 @@ def test_a_finished_run_with_a_damaged_results_csv_rewrites_it_from_its_checkpoi
 
 def _cache(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    (cfg,) = [c for _, c in grid.figure_runs("fig1", "smoke")]
+    (cfg,) = [c for _, c in figures.figure_runs("fig1", "smoke")]
     assert experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False).done == 1
     return cfg, experiments.run_path(cfg, "smoke")
 
@@ -705,7 +705,7 @@ def test_a_checkpoint_whose_record_contradicts_itself_is_named_as_damaged(tmp_pa
 
 def test_reading_results_never_writes(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    for label, cfg in grid.figure_runs("fig1", "smoke"):
+    for label, cfg in figures.figure_runs("fig1", "smoke"):
         fakes.write_run(cfg, "smoke", lambda s: s / 400)
     written = []
     monkeypatch.setattr(store, "atomic_write", lambda *a: written.append(a))
@@ -786,7 +786,7 @@ def test_a_full_disk_stops_reproduce_with_one_line(tmp_path):
 
 def test_the_api_names_bad_arguments(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    for label, cfg in grid.figure_runs("fig1", "smoke"):
+    for label, cfg in figures.figure_runs("fig1", "smoke"):
         fakes.write_run(cfg, "smoke", lambda s: s / 400)
     assert experiments.run_all("smoke", figures="fig1", workers=1, progress=False).cached == 1  # one name is a figure
     for workers in (0, -3, "2", True):
@@ -862,7 +862,7 @@ def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path,
     from oapo_lite.study import reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
-    (cfg,) = [cfg for _, cfg in grid.figure_runs("fig1", "smoke")]
+    (cfg,) = [cfg for _, cfg in figures.figure_runs("fig1", "smoke")]
     lock = experiments.runs_dir("smoke") / "checkpoints" / experiments.run_id(cfg) / ".lock"
     lock.mkdir(parents=True)
     assert reproduce.main(["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]) == 1

@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from oapo_lite.study import claims, grid, verdicts
+from oapo_lite.study import claims, figures, verdicts
 
 import fakes
 
 
 def write_runs(figure, budget, plateau):
     """A fake finished run per (label, seed): a ramp to ``plateau[label]`` of the optimum."""
-    for label, cfg in grid.figure_runs(figure, budget):
+    for label, cfg in figures.figure_runs(figure, budget):
         fakes.write_run(cfg, budget, lambda steps: np.minimum(steps / 80_000, 1.0) * plateau[label])
 
 
@@ -22,7 +22,7 @@ def test_table_uses_complete_budgets_only(tmp_path, monkeypatch):
     table = claims.table(("fig5b",))
     assert set(table["budget"]) == {"paper (5 seeds)"}
     assert (table["verdict"] == verdicts.REPRODUCED).all()  # every claim of Fig. 5b holds in this fake data
-    assert len(table) == len(grid.get_figure("fig5b").claims)
+    assert len(table) == len(figures.get_figure("fig5b").claims)
 
 
 def test_the_readme_carries_the_claims_table_the_data_gives():
@@ -35,10 +35,10 @@ def test_the_readme_carries_the_claims_table_the_data_gives():
 
 def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    first = next(f for f in grid.GRID if f.claims and f.runs_at is None)
+    first = next(f for f in figures.GRID if f.claims and f.runs_at is None)
     with pytest.raises(FileNotFoundError, match=rf"run\(s\) of {first.id} at budget 'cpu' are not on disk .*reproduce"):
         claims.glance()
-    engine = next(f for f in grid.GRID if f.claims and f.runs_at is not None and "paper20" not in f.runs_at)
+    engine = next(f for f in figures.GRID if f.claims and f.runs_at is not None and "paper20" not in f.runs_at)
     with pytest.raises(ValueError, match=rf"{engine.id} has no runs at budget 'paper20'"):
         claims._verdicts(engine, "paper20", required=True)
 
@@ -53,7 +53,7 @@ def test_glance_budgets_are_shares_of_the_paper():
 
 
 def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
-    """``grid.A2C_CHOSEN`` is the setting ``verdicts.sweep_table``'s rule picks from the committed
+    """``figures.smax.A2C_CHOSEN`` is the setting ``verdicts.sweep_table``'s rule picks from the committed
     SEAC / SePS sweep on 3m, per algorithm."""
     from oapo_lite.study import experiments
 
@@ -62,11 +62,11 @@ def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
     table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
-            for label, f in chosen["family"].items()} == grid.A2C_CHOSEN
+            for label, f in chosen["family"].items()} == figures.smax.A2C_CHOSEN
 
 
 def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
-    """``grid.SWEEP_CHOSEN`` (Fig. 4's learning rate, entropy and clip per family) is what the
+    """``figures.smax.SWEEP_CHOSEN`` (Fig. 4's learning rate, entropy and clip per family) is what the
     sweep's rule picks from the committed 2s3z sweep."""
     from oapo_lite.study import experiments
 
@@ -75,7 +75,7 @@ def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
     table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["lr", "entropy_coef", "clip"]].iloc[0])
-            for label, f in chosen["family"].items()} == grid.SWEEP_CHOSEN
+            for label, f in chosen["family"].items()} == figures.smax.SWEEP_CHOSEN
 
 
 # the condition each status's reason states (``verdicts._reason``, ``faster``'s veto, ``_undecidable``,
@@ -103,7 +103,7 @@ def test_every_row_of_the_glance_gives_the_reason_of_its_own_status_and_no_other
         assert re.search(REASONS[status], why), (status, why)
         assert not [s for s, pattern in REASONS.items() if s != status and re.search(pattern, why)], (status, why)
     # the summary counts every claim once, a row of claims without runs as its claims
-    assert claims.summary(table).to_numpy().sum() == sum(len(f.claims) for f in grid.GRID if f.claims)
+    assert claims.summary(table).to_numpy().sum() == sum(len(f.claims) for f in figures.GRID if f.claims)
 
 
 def test_the_conclusion_names_every_claim_once_under_its_status():

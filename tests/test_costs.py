@@ -6,7 +6,7 @@ import fakes
 
 from oapo_lite import __main__ as cli
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import costs, experiments, grid
+from oapo_lite.study import costs, figures, grid
 
 
 def _table(path, prices: dict) -> None:
@@ -19,7 +19,7 @@ def _table(path, prices: dict) -> None:
 def test_a_plan_prices_what_would_train_and_trains_and_writes_nothing(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
     monkeypatch.setattr(costs, "COSTS", tmp_path / "costs.csv")
-    oappo, oatrpo, mappo, happo, hatrpo = (next(r for r in grid.runs_of("fig3b", "smoke") if r.label == label)
+    oappo, oatrpo, mappo, happo, hatrpo = (next(r for r in figures.runs_of("fig3b", "smoke") if r.label == label)
                                            for label in ("oappo", "oatrpo", "mappo", "happo", "hatrpo"))
     fakes.write_run(oappo.cfg, "smoke", lambda s: s / 400, cpu_s=2.0, wall_s=1.0, cpu_model="x", cpu_count=2)
     fakes.write_run(oatrpo.cfg, "smoke", lambda s: s / 400)  # finished before costs were recorded

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import experiments, grid
+from oapo_lite.study import experiments, figures, grid
 
 import fakes
 
@@ -19,9 +19,9 @@ def test_a_run_id_depends_only_on_fields_that_differ_from_the_defaults():
 
 
 def test_every_paper_run_has_its_own_id():
-    ids = {experiments.run_id(cfg) for fig in grid.FIGURES
-           for _, cfg in grid.figure_runs(fig, "paper")}
-    configs = {str(cfg.flat()) for fig in grid.FIGURES for _, cfg in grid.figure_runs(fig, "paper")}
+    ids = {experiments.run_id(cfg) for fig in figures.FIGURES
+           for _, cfg in figures.figure_runs(fig, "paper")}
+    configs = {str(cfg.flat()) for fig in figures.FIGURES for _, cfg in figures.figure_runs(fig, "paper")}
     assert len(ids) == len(configs)
 
 
@@ -42,42 +42,57 @@ def test_paper20_is_paper_with_twenty_seeds():
     assert paper20.seeds == tuple(range(20)) and paper20.seeds[:5] == paper.seeds
     assert (paper20.steps, paper20.eval_every, paper20.eval_episodes) == (paper.steps, paper.eval_every, paper.eval_episodes)
     # the first five seeds are the very runs of the paper budget (same ids)
-    for fig in grid.MAZE_FIGURES:
-        ids = {experiments.run_id(c) for _, c in grid.figure_runs(fig, "paper20")}
-        assert {experiments.run_id(c) for _, c in grid.figure_runs(fig, "paper")} <= ids
+    for fig in figures.MAZE_FIGURES:
+        ids = {experiments.run_id(c) for _, c in figures.figure_runs(fig, "paper20")}
+        assert {experiments.run_id(c) for _, c in figures.figure_runs(fig, "paper")} <= ids
         # ... and they are trained once: both budgets read the same cache, each writes its own figures
-        for _, c in grid.figure_runs(fig, "paper"):
+        for _, c in figures.figure_runs(fig, "paper"):
             assert experiments.run_path(c, "paper20") == experiments.run_path(c, "paper")
     assert experiments.figures_dir("paper20") != experiments.figures_dir("paper")
 
 
 def test_the_grid_keeps_every_committed_maze_run_valid():
     """``make reproduce BUDGET=paper`` finds every committed run: the ids did not move."""
-    runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in grid.figure_runs(fig, "paper")]
+    runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in figures.figure_runs(fig, "paper")]
     committed = {p.stem for p in (experiments.ROOT / "figures" / "data" / "runs").glob("*.csv")}
     assert len(runs) == 86 and {experiments.run_id(cfg) for cfg in runs} <= committed  # 81 and HATRPO's 5
 
 
 def test_a_new_figure_is_data_with_its_own_budget_overrides():
     fig = grid.Figure("sweep", (("a", dict(algo="happo")), ("b", dict(algo="mappo", lr=1e-3))),
-                             common=dict(env="black_blue_red"), seeds=2, budgets={"paper": dict(steps=16_000)},
+                             common=dict(env="black_blue_red"), seeds=2, budgets={"paper": grid.At(steps=16_000)},
                              cpus=2, gpus=0.5)
-    runs = grid.runs_of(fig, "paper")
+    runs = figures.runs_of(fig, "paper")
     assert [(r.label, r.cfg.algo, r.cfg.seed) for r in runs] == [("a", "happo", 0), ("a", "happo", 1),
                                                                 ("b", "mappo", 0), ("b", "mappo", 1)]
     assert {(r.cfg.env, r.cfg.steps, r.cfg.eval_every, r.cpus, r.gpus) for r in runs} == \
         {("black_blue_red", 16_000, grid.BUDGETS["paper"].eval_every, 2, 0.5)}
     assert runs[2].cfg.lr == 1e-3 and runs[0].cfg.lr == 5e-4
-    assert grid.runs_of(fig, "smoke")[0].cfg.steps == grid.BUDGETS["smoke"].steps
+    assert figures.runs_of(fig, "smoke")[0].cfg.steps == grid.BUDGETS["smoke"].steps
     with pytest.raises(ValueError, match="unknown figure 'fig9'.*fig3b"):
-        grid.runs_of("fig9", "paper")
+        figures.runs_of("fig9", "paper")
+
+
+def test_a_budget_override_is_typed_and_names_only_fields_a_budget_has():
+    at = grid.At(steps=16_000, envs={"black_red": grid.At(seeds=(3,))})
+    fig = grid.Figure("f", (("a", dict(algo="happo", env="black_red")), ("b", dict(algo="happo", env="black_blue_red"))),
+                      budgets={"paper": at})
+    assert [(r.label, r.cfg.steps, r.cfg.seed) for r in figures.runs_of(fig, "paper")] == [("a", 16_000, 3)]
+    with pytest.raises(TypeError, match="unexpected keyword argument 'step'"):
+        grid.At(step=1_000)
+    with pytest.raises(TypeError, match="figure 'f': the override of budget 'paper' is a dict; write At"):
+        grid.Figure("f", (), budgets={"paper": dict(steps=1_000)})
+    with pytest.raises(TypeError, match="figure 'f': the override of budget 'paper' for env 'black_red' is a dict"):
+        grid.Figure("f", (), budgets={"paper": grid.At(envs={"black_red": dict(steps=1)})})
+    with pytest.raises(ValueError, match="figure 'f': unknown budget 'papr'; choose from"):
+        grid.Figure("f", (), budgets={"papr": grid.At()})
 
 
 def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
     from oapo_lite.study import executors, reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    (cfg,) = [cfg for _, cfg in grid.figure_runs("fig1", "smoke")]
+    (cfg,) = [cfg for _, cfg in figures.figure_runs("fig1", "smoke")]
 
     def broken(*args, **kwargs):
         raise RuntimeError("a broken run")
@@ -110,10 +125,10 @@ def test_bad_executor_options_name_what_is_allowed(capsys):
 
 
 def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_names():
-    for fig in grid.FIGURES:  # every run of every figure is a valid config at every budget
+    for fig in figures.FIGURES:  # every run of every figure is a valid config at every budget
         for budget in grid.BUDGETS:
-            grid.runs_of(fig, budget)
-    cpu = {f: grid.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
+            figures.runs_of(fig, budget)
+    cpu = {f: figures.runs_of(f, "cpu") for f in ("fig4_smax", "figA_mamujoco", "fig6b")}
     for fig, runs in cpu.items():
         labels = {r.label for r in runs}
         per_curve = {(r.label, r.cfg.env): 0 for r in runs}
@@ -129,30 +144,30 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
         "smax:3m": 300_000, "smax:2s3z": 1_000_000, "smax:6h_vs_8z": 1_000_000, "smax:3s5z_vs_3s6z": 3_000_000}
     # issue 32: every family at its sweep's choice, OAPPO's per-kind reading only where kinds differ,
     # and the 3M-step map for MAPPO, HAPPO and the per-kind reading alone
-    by_env = {e: {r.label for r in cpu["fig4_smax"] if r.cfg.env == e} for e in grid.get_figure("fig4_smax").envs("cpu")}
+    by_env = {e: {r.label for r in cpu["fig4_smax"] if r.cfg.env == e} for e in figures.get_figure("fig4_smax").envs("cpu")}
     assert "oappo type" in by_env["smax:2s3z"] and "oappo type" not in by_env["smax:3m"] | by_env["smax:6h_vs_8z"]
-    assert by_env["smax:3s5z_vs_3s6z"] == set(grid.LONG_SMAX_CURVES)
+    assert by_env["smax:3s5z_vs_3s6z"] == set(figures.smax.LONG_SMAX_CURVES)
     for r in cpu["fig4_smax"]:
         family = {"oappo": "happo"}.get(r.label, r.label)
-        if family in grid.SWEEP_CHOSEN:
-            assert (r.cfg.lr, r.cfg.entropy_coef, r.cfg.clip) == grid.SWEEP_CHOSEN[family], r.label
-        elif r.cfg.algo in grid.A2C_CHOSEN:
-            assert (r.cfg.a2c_lr, r.cfg.entropy_coef) == grid.A2C_CHOSEN[r.cfg.algo]
-    paper = {r.cfg.env: r.cfg.steps for r in grid.runs_of("fig4_smax", "paper")}
+        if family in figures.smax.SWEEP_CHOSEN:
+            assert (r.cfg.lr, r.cfg.entropy_coef, r.cfg.clip) == figures.smax.SWEEP_CHOSEN[family], r.label
+        elif r.cfg.algo in figures.smax.A2C_CHOSEN:
+            assert (r.cfg.a2c_lr, r.cfg.entropy_coef) == figures.smax.A2C_CHOSEN[r.cfg.algo]
+    paper = {r.cfg.env: r.cfg.steps for r in figures.runs_of("fig4_smax", "paper")}
     assert paper["smax:6h_vs_8z"] == 40_000_000 and len(paper) == 5
     # A2C runs evaluate at the same env steps as the PPO family on an engine's batch shape too
     by_algo = {r.cfg.algo: r.cfg for r in cpu["fig4_smax"] if r.cfg.env == "smax:3m" and r.cfg.seed == 0}
     ppo, a2c = by_algo["oappo"], by_algo["seac"]
     assert ppo.eval_every * ppo.n_envs * ppo.rollout_len == a2c.eval_every * a2c.n_envs * a2c.n_step
     # the engine figures have no runs at the maze-only budgets, and a bad budget is named
-    assert grid.runs_of("fig4_smax", "paper20") == []
+    assert figures.runs_of("fig4_smax", "paper20") == []
     with pytest.raises(ValueError, match="unknown budget 'huge'"):
-        grid.runs_of("fig4_smax", "huge")
+        figures.runs_of("fig4_smax", "huge")
 
 
 def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
-    runs = grid.runs_of("fig4_smax", "smoke")
+    runs = figures.runs_of("fig4_smax", "smoke")
     assert experiments.load_figure("fig4_smax", "smoke", skip_missing=True).empty
     cfg = runs[0].cfg
     fakes.write_run(cfg, "smoke", lambda steps: steps / 6400, grid=1, env=cfg.env)

@@ -10,7 +10,7 @@ import nbformat
 import pytest
 import torch
 
-from oapo_lite.study import grid, quoted
+from oapo_lite.study import figures, quoted
 
 import numeric_paths
 
@@ -106,9 +106,9 @@ def typed_budget_errors(notebook: Path) -> list[str]:
 
     from oapo_lite.study import experiments
 
-    figures = [f for f in grid.GRID if f.notebook == notebook.stem]
+    figs = [f for f in figures.GRID if f.notebook == notebook.stem]
     seeds, shares = set(), set()
-    for fig in figures:
+    for fig in figs:
         for budget in ("cpu", "paper20"):
             if fig.runs_at is not None and budget not in fig.runs_at:
                 continue
@@ -131,7 +131,7 @@ def typed_budget_errors(notebook: Path) -> list[str]:
     return errors
 
 
-@pytest.mark.parametrize("notebook", sorted({f.notebook for f in grid.GRID if f.notebook}))
+@pytest.mark.parametrize("notebook", sorted({f.notebook for f in figures.GRID if f.notebook}))
 def test_no_empirical_notebook_types_a_seed_count_or_share_that_the_data_contradict(notebook):
     assert typed_budget_errors(NOTEBOOKS[0].parent / f"{notebook}.ipynb") == []
 

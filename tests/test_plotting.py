@@ -7,7 +7,7 @@ import pytest
 from matplotlib.animation import FuncAnimation
 
 from oapo_lite.envs import load_maze
-from oapo_lite.study import palette, plotting
+from oapo_lite.study import figures, palette, plotting
 
 
 def _discs(ax):
@@ -80,17 +80,13 @@ def test_split_outcomes_are_drawn_by_a_level_some_seed_reached_with_every_seed_o
 
 def _figure_curves(figure) -> list[str]:
     """A grid figure's curves as the figures name them (a sweep's value as "sigma = 0.1")."""
-    from oapo_lite.study import grid
-
     sweep = {"fig3c": "sigma", "fig3d": "lambda"}.get(figure.id)
     return [f"{sweep} = {label:g}" if sweep else str(label) for label, _ in figure.curves]
 
 
 def test_two_curves_of_a_figure_never_share_a_colour_and_a_curve_keeps_its_own():
-    from oapo_lite.study import grid
-
     tuning = ("fig_sweep_2s3z", "fig_a2c_smax", "fig_a2c_2s3z")  # drawn as tables, a row per setting
-    for figure in (f for f in grid.GRID if f.id not in tuning):
+    for figure in (f for f in figures.GRID if f.id not in tuning):
         names = list(dict.fromkeys(_figure_curves(figure)))
         colours = [palette.color(n) for n in names]  # every curve has one: a missing one raises
         assert len(set(colours)) == len(colours), (figure.id, names, colours)

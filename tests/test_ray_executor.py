@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from oapo_lite.neural.results import learning
-from oapo_lite.study import experiments, grid
+from oapo_lite.study import experiments, figures
 from oapo_lite.study.grid import Figure
 
 # The head node lives in its own process (so that other drivers, including a killed one, come
@@ -84,7 +84,7 @@ def run_files(runs: Path) -> dict[str, str]:
 
 
 # the maze figures: the engines' smoke runs are exercised by reproduce in CI and by their own tests
-MAZES = grid.MAZE_FIGURES
+MAZES = figures.MAZE_FIGURES
 
 
 @pytest.fixture(scope="module")
@@ -139,7 +139,7 @@ def test_a_run_that_raises_is_reported_and_the_others_complete(executor, request
     with figures_at(tmp_path) as runs:
         count = experiments.run_all("smoke", figures=(broken,), executor=executor, address=address,
                                     progress=False)
-        paths = {r.label: experiments.run_path(r.cfg, "smoke") for r in grid.runs_of(broken, "smoke")}
+        paths = {r.label: experiments.run_path(r.cfg, "smoke") for r in figures.runs_of(broken, "smoke")}
         assert list(runs.glob("*.csv")) == [paths["good"]]
     assert count.done == 1 and [f.run.label for f in count.failed] == ["bad"]
     error = count.failed[0].error

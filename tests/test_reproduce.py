@@ -3,7 +3,7 @@ cell is reported with its notebook and its cell."""
 import nbformat
 import pytest
 
-from oapo_lite.study import reproduce
+from oapo_lite.study import figures, reproduce
 from oapo_lite.study.reproduce import NotebookFailed, run_notebook
 
 
@@ -51,10 +51,8 @@ def test_notebooks_run_side_by_side_each_in_its_own_kernel(tmp_path, capfd):
 def test_the_student_budget_trains_and_runs_only_what_it_shows():
     """Fig. 3b-3d at 3 seeds: the MAPPO and lambda traps; the other figures train nothing there,
     and only the notebooks that need no other runs are executed."""
-    from oapo_lite.study import grid
-
-    assert {r.figure for f in grid.FIGURES for r in grid.runs_of(f, "student")} == {"fig3b", "fig3c", "fig3d"}
-    assert len(grid.runs_of("fig3b", "student")) == 4 * 3
+    assert {r.figure for f in figures.FIGURES for r in figures.runs_of(f, "student")} == {"fig3b", "fig3c", "fig3d"}
+    assert len(figures.runs_of("fig3b", "student")) == 5 * 3  # OAPPO, OATRPO, MAPPO, HAPPO, HATRPO
     names = [p.name.split("_")[0] for p in reproduce.notebook_paths("student")]
     assert names == ["00", "01", "02", "03", "04", "05", "10", "11", "12"]
     assert len(reproduce.notebook_paths()) > len(names)  # every other budget runs all of them

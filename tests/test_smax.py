@@ -111,13 +111,13 @@ def test_oappo_trains_end_to_end_and_resumes_identically(env, tmp_path):
 
 
 def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_path):
-    """``grid.SMAX_TUNED`` (Fig. 4's settings on every map) is a valid config for every
+    """``figures.smax.SMAX_TUNED`` (Fig. 4's settings on every map) is a valid config for every
     algorithm of Fig. 4, and a MAPPO run with it (4 minibatches) resumes to the same numbers."""
-    from oapo_lite.study import grid
+    from oapo_lite.study import figures
 
-    for algo in grid.SMAX_ALGOS:
-        TrainConfig(algo=algo, env="smax:3m", **grid.SMAX_BATCH, **grid.SMAX_TUNED)
-    cfg = TrainConfig(**{**grid.SMAX_TUNED, **dict(algo="mappo", env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10,
+    for algo in figures.smax.SMAX_ALGOS:
+        TrainConfig(algo=algo, env="smax:3m", **figures.smax.SMAX_BATCH, **figures.smax.SMAX_TUNED)
+    cfg = TrainConfig(**{**figures.smax.SMAX_TUNED, **dict(algo="mappo", env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10,
                                                     eval_every=1, eval_episodes=N, max_steps=MAX_STEPS, checkpoint_every=1,
                                                     hidden=(16,))})
     full = train(cfg, tmp_path / "full", progress=False)

@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from oapo_lite.study import grid, statistics, verdicts as v
+from oapo_lite.study import figures, statistics, verdicts as v
 from oapo_lite.study.claims import judge
 
 
@@ -173,7 +173,7 @@ def test_claim_table_has_a_row_per_budget_and_claim():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
                    "oatrpo": (30_000, 1.0), "hatrpo": (60_000, 1.0)})
     table = v.claim_table({"five": judge("fig3b", good), "one": judge("fig3b", good[good["seed"] == 0])})
-    assert len(table) == 2 * len(grid.get_figure("fig3b").claims)
+    assert len(table) == 2 * len(figures.get_figure("fig3b").claims)
     by = table.set_index("budget")
     assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
     assert (by.loc["one", "verdict"] == v.NOT_TESTABLE).all()  # one seed cannot decide anything

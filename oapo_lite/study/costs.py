@@ -20,7 +20,8 @@ import pandas as pd
 
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import experiments, grid, readme
+from oapo_lite.study import experiments, readme
+from oapo_lite.study.figures import FIGURES, runs_of
 
 COSTS = experiments.ROOT / "figures" / "data" / "costs.csv"  # the committed table, whatever OAPO_FIGURES says
 KEY = ("env", "algo", "networks", "update_by", "reuse_mode", "reuse_adapt", "n_envs", "rollout_steps", "hidden",
@@ -76,7 +77,7 @@ class Line:
     sources: str
 
 
-def plan(budget: str, figures=grid.FIGURES, workers: int = 2,
+def plan(budget: str, figures=FIGURES, workers: int = 2,
          from_nothing: bool = False) -> tuple[list[Line], Line, float]:
     """Per figure and in total (every distinct run once): runs, env steps, on disk, to train and
     its CPU hours; and the wall hours of the runs to train on ``workers`` processes, as
@@ -102,7 +103,7 @@ def plan(budget: str, figures=grid.FIGURES, workers: int = 2,
                     sum(run_cpu_seconds(r.cfg, prices) for r in priced) / 3600, len(todo) - len(priced),
                     " + ".join(sources) or ("-" if not todo else "none"))
 
-    lines = [line(f, grid.runs_of(f, budget)) for f in figures]  # a run of two figures is in both
+    lines = [line(f, runs_of(f, budget)) for f in figures]  # a run of two figures is in both
     total = line("total", runs)
     todo = [r for r in runs if not on_disk[experiments.run_id(r.cfg)] and cost_key(r.cfg) in prices]
     return lines, total, wall_hours(todo, prices, workers)
@@ -175,7 +176,7 @@ def readme_markdown() -> str:
     per_budget = {b: plan(b, from_nothing=True, workers=README_WORKERS) for b in README_BUDGETS}
     cells = {b: {x.figure: x for x in lines} for b, (lines, _, _) in per_budget.items()}
     rows = [[f, *(_cell(cells[b][f]) if cells[b][f].runs else "-" for b in README_BUDGETS)]
-            for f in grid.FIGURES if any(cells[b][f].runs for b in README_BUDGETS)]
+            for f in FIGURES if any(cells[b][f].runs for b in README_BUDGETS)]
     rows.append(["total (a run of two figures once)", *(_cell(per_budget[b][1]) for b in README_BUDGETS)])
     sentences = []
     for b, (_, total, wall) in per_budget.items():

@@ -6,7 +6,7 @@ Runs are trained by an executor (``executors``: this machine's processes, or a R
 the driver writes each run's evaluation rows to the cache atomically once the run has
 finished, so a reproduction that is interrupted resumes by skipping what is on disk; a
 figure's CSV is the concatenation of its runs, with a ``label`` column naming the curve each
-row belongs to. What the runs are is the grid's (``grid.GRID``).
+row belongs to. What the runs are is the grid's (``figures.GRID``).
 """
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ from oapo_lite.envs.maps import load_maze
 from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.store import DamagedFile, read_arrays, write_frame
-from oapo_lite.study import grid
-from oapo_lite.study.grid import COMMITTED, FIGURES, Run, SHARED_RUNS, figure_runs, runs_of
+from oapo_lite.study.figures import FIGURES, figure_runs, get_figure, runs_of
+from oapo_lite.study.grid import COMMITTED, SHARED_RUNS, Run
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -321,7 +321,7 @@ def export_figure(figure, budget: str) -> Path | None:
     run of it is on disk; the writer of the run cache does this, so that reading never writes.
     An unchanged file is left alone. Returns the path written, or None."""
     name = getattr(figure, "id", figure)
-    if name not in grid.FIGURES or not runs_of(name, budget) or missing_runs(name, budget):
+    if name not in FIGURES or not runs_of(name, budget) or missing_runs(name, budget):
         return None  # not a grid figure, no runs at this budget, or not all of them yet
     df, _ = read_figure(name, budget)
     path = data_dir(budget) / f"{name}.csv"
@@ -345,7 +345,7 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
     failed: loading a figure never trains, so a notebook that may train says so with this call."""
     failed = run_all(budget, figures=figures, workers=workers, progress=False).failed
     if failed:
-        raise RuntimeError(f"{len(failed)} run(s) of {[grid.get_figure(f).id for f in figures]} failed "
+        raise RuntimeError(f"{len(failed)} run(s) of {[get_figure(f).id for f in figures]} failed "
                            "(reported above)")
 
 

@@ -40,18 +40,18 @@ from oapo_lite.neural.rollout import make_env
 from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
 from oapo_lite.store import atomic_write, write_frame
-from oapo_lite.study import experiments, grid
+from oapo_lite.study import experiments, figures
 
 DATA = experiments.data_dir("cpu") / "gate_statistic"
-ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", grid.HALFCHEETAH)
+ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", figures.mujoco.HALFCHEETAH)
 SIGMA = TrainConfig.sigma  # the paper's, where the rule is read
 MIN_OPEN, MAX_PAIRS = 0.25, 0.9
 
 
 def happo_config(env: str, seed: int) -> TrainConfig:
     """HAPPO's config on ``env`` at the ``cpu`` budget of the figure that runs it."""
-    figure = "fig_early_reuse" if env == grid.HALFCHEETAH else "fig4_smax"
-    for run in grid.runs_of(figure, "cpu"):
+    figure = "fig_early_reuse" if env == figures.mujoco.HALFCHEETAH else "fig4_smax"
+    for run in figures.runs_of(figure, "cpu"):
         if run.cfg.algo == "happo" and run.cfg.env == env:
             return dataclasses.replace(run.cfg, seed=seed)
     raise ValueError(f"no HAPPO run of {figure} on {env}")
@@ -80,7 +80,7 @@ def measure(cfg: TrainConfig) -> pd.DataFrame:
     return pd.DataFrame(rows).assign(env=cfg.env, seed=cfg.seed)
 
 
-def summary(df: pd.DataFrame, sigmas=grid.SIGMAS) -> pd.DataFrame:
+def summary(df: pd.DataFrame, sigmas=figures.mazes.SIGMAS) -> pd.DataFrame:
     """Per env, statistic and sigma: open, last open, pairs, auc (see the module docstring),
     each a mean over the seeds on disk."""
     out = []

@@ -14,18 +14,18 @@ import pandas as pd
 from oapo_lite import store
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import experiments, grid, verdicts
+from oapo_lite.study import experiments, figures, grid, verdicts
 
-LAMBDAS = grid.LAMBDAS
-ADAPTIVE = grid.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
+LAMBDAS = figures.mazes.LAMBDAS
+ADAPTIVE = figures.mazes.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
 # curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
 CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
     f"oappo lambda={lam:g}": dict(algo="oappo", reuse_lambda=lam) for lam in LAMBDAS if lam != TrainConfig.reuse_lambda} | {
-    ADAPTIVE: dict(grid.ADAPTIVE_CURVES[0][1])}
+    ADAPTIVE: dict(figures.mazes.ADAPTIVE_CURVES[0][1])}
 
 
-def figures(layouts=None) -> list[grid.Figure]:
-    """One grid entry per layout (not in ``grid.GRID``: the study is run on request)."""
+def layout_figures(layouts=None) -> list[grid.Figure]:
+    """One grid entry per layout (not in ``figures.GRID``: the study is run on request)."""
     layouts = sorted(LAYOUTS) if layouts is None else list(layouts)
     unknown = sorted(set(layouts) - set(LAYOUTS))
     if unknown:
@@ -37,12 +37,12 @@ def figures(layouts=None) -> list[grid.Figure]:
 def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
     """(layout, curve label, config) for every run of the study at ``budget``."""
     return [(fig.common["env"].removeprefix("layout:"), label, cfg)
-            for fig in figures(layouts) for label, cfg in grid.figure_runs(fig, budget)]
+            for fig in layout_figures(layouts) for label, cfg in figures.figure_runs(fig, budget)]
 
 
 def load(budget: str, layouts=None) -> pd.DataFrame:
     """Tidy rows of the study, read from the run cache (``experiments.train_runs(budget,
-    figures())`` trains what is missing; ``export`` writes the study's table). Reads only."""
+    layout_figures())`` trains what is missing; ``export`` writes the study's table). Reads only."""
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         if not experiments.run_path(cfg, budget).exists():

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from oapo_lite import cli
 from oapo_lite.study import grid
+from oapo_lite.study.figures import FIGURES, get_figure
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = ROOT / "notebooks"
@@ -210,9 +211,9 @@ def command_line() -> cli.Parser:
                         help=cli.flag_help("the Ray cluster: auto (the one running on this machine) or its head's "
                                            "HOST:PORT", "a private cluster on this machine",
                                            "auto, HOST:PORT or ray://HOST:PORT"))
-    parser.add_argument("--figures", nargs="+", default=list(grid.FIGURES), metavar="FIGURE",
+    parser.add_argument("--figures", nargs="+", default=list(FIGURES), metavar="FIGURE",
                         help=cli.flag_help("train only these figures' runs", "every figure",
-                                           f"one or more of {list(grid.FIGURES)}"))
+                                           f"one or more of {list(FIGURES)}"))
     parser.add_argument("--skip-notebooks", action="store_true",
                         help=cli.flag_help("train the runs only", "then execute every notebook"))
     parser.add_argument("--plan", action="store_true",
@@ -230,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     try:  # fail fast, naming what is allowed
         grid.get_budget(args.budget)
         for figure in args.figures:
-            grid.get_figure(figure)
+            get_figure(figure)
         if args.inplace and args.skip_notebooks:
             raise ValueError("--inplace writes the executed notebooks, and --skip-notebooks runs none; give one")
         if args.address is not None and args.executor != "ray":

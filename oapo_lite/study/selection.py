@@ -21,14 +21,14 @@ import pandas as pd
 
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
-from oapo_lite.study import experiments, grid
+from oapo_lite.study import experiments, figures
 
 # (env, reading) -> the figure and curve label of the committed runs the rule reads
 # (env, reading) -> the figure, curve label and seeds of the OAPPO runs the rule reads
 RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:6h_vs_8z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:2s3z", "type"): ("fig4_smax", "oappo type", (0, 1, 2, 3, 4)),
-             (grid.HALFCHEETAH, "agent"): ("fig_selection_mamujoco", "oappo always", grid.SELECTION_SEEDS)}
+             (figures.mujoco.HALFCHEETAH, "agent"): ("fig_selection_mamujoco", "oappo always", figures.readings.SELECTION_SEEDS)}
 
 
 def across_pairs(kl: np.ndarray, owner: list[int]) -> np.ndarray:
@@ -40,7 +40,7 @@ def gate_sigma(env: str, reading: str) -> float:
     """The rule (module docstring): sigma for the gated curve of ``reading`` on ``env``."""
     figure, label, seeds = RULE_RUNS[env, reading]
     values = []
-    for run in grid.runs_of(figure, "cpu"):
+    for run in figures.runs_of(figure, "cpu"):
         if run.label == label and run.cfg.env == env and run.cfg.seed in seeds:
             owner = owners(run.cfg.network_kind, env_registry.agent_types(env, run.cfg.max_steps))
             for kl in experiments.read_run(run.cfg, "cpu")["kl_matrix"].dropna():

@@ -1,0 +1,98 @@
+"""App. A on multi-agent MuJoCo (HalfCheetah 2x3): no reuse, full sharing, gated reuse and direct
+reuse on homogeneous agents, the settings and learner the runs use, OAPPO's readings and the
+selection ablation."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from oapo_lite.study.figures.readings import (READING_NAMES, SELECTION_SEEDS, reading_curves, selection_claims,
+                                              selection_curves, sigma_on)
+from oapo_lite.study.grid import ENGINE_BUDGETS, At, Figure
+from oapo_lite.study.verdicts import RETURN, higher, paired_higher
+
+# no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO, a net per agent with the engines'
+# mean gate, and one net seat by seat; per kind is per agent here, every leg being its own kind)
+# and direct reuse (SEAC). The PPO family runs 15 epochs, HARL's setting that helped most in our
+# loop (``fig_mamujoco_settings``).
+FIGA_CURVES = {"happo": dict(algo="happo"), "mappo": dict(algo="mappo"), "oappo": dict(algo="oappo", kl_reduce="mean"),
+               "oappo one seat": dict(algo="oappo", networks="one", update_by="seat"), "seac": dict(algo="seac")}
+FIGA_ALGOS = tuple(FIGA_CURVES)
+FIGA_READINGS = {r: READING_NAMES[r] for r in FIGA_CURVES if r in READING_NAMES}
+HALFCHEETAH = "mamujoco:HalfCheetah-2x3"
+# the cpu batch: 8 copies x 250 steps, MuJoCo's 1,000-step episodes
+MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=10)
+# App. A's cpu budget: 1M steps, 10% of HARL's scale; 10 episodes every 20 iterations (40k
+# steps); the studies of its settings and learner at 3 seeds
+APPA_CPU = At(steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)
+HALFCHEETAH_1M = replace(APPA_CPU, seeds=(0, 1, 2))
+MAMUJOCO_SMOKE = At(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100))
+# HARL's tuned HalfCheetah 2x3 HAPPO settings, tried in our loop one at a time, then together
+HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=15), "128x3": dict(hidden=(128, 128, 128)),
+                    "feature norm": dict(feature_norm=True), "20 x 200": dict(n_envs=20, rollout_len=200)}
+# Eq. 9's selection here: sigma per (env, reading) by ``selection.gate_sigma``'s rule; the gated
+# curve joins the ablation once the rule has given it
+SELECTION_SIGMA: dict[tuple[str, str], float] = {}
+# the ablation's learner: the one ``fig_mamujoco_normalize``'s rule chose
+SELECTION_LEARNER = dict(FIGA_CURVES["happo"], normalize=True)
+
+FIGURES = (
+    # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
+    Figure("figA_mamujoco", tuple(FIGA_CURVES.items()), common=dict(env=HALFCHEETAH, ppo_epochs=15),
+           runs_at=ENGINE_BUDGETS, budgets={
+               "smoke": MAMUJOCO_SMOKE,
+               "cpu": APPA_CPU,
+               "paper": At(steps=10_000_000, eval_every=25, eval_episodes=10,
+                           config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
+           }, metric=RETURN, claims=(
+               # on homogeneous agents, reusing others' experience as it is (SEAC's importance-weighted
+               # reuse; MAPPO's one network on everyone's data) ends lower than using one's own
+               # (HAPPO), while OAPPO's gated reuse does not
+               (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
+               (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
+               *(c for r, name in FIGA_READINGS.items()
+                 for c in ((higher, (r, "seac"), f"{name} ends above direct reuse (SEAC)"),
+                           (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)"),
+                           # the clean contrast: the same settings and initial networks per seed, reuse or none
+                           (paired_higher, (r, "happo"), f"{name} ends above no reuse (HAPPO), seed by seed")))),
+           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+    Figure("fig_selection_mamujoco", selection_curves(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
+                                                      SELECTION_LEARNER),
+           common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
+               "smoke": replace(MAMUJOCO_SMOKE, seeds=(10,)), "cpu": replace(HALFCHEETAH_1M, seeds=SELECTION_SEEDS)},
+           metric=RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
+                                                        name="HalfCheetah 2x3")),
+           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+    # Does OAPPO's early reuse (its gate is open while the untrained nets look alike) lower the
+    # return? Ten seed pairs, so that an interval on the final return's difference can decide it;
+    # not a claim of the paper. The control lets Eq. 9 act only after 10 iterations (20k steps),
+    # when the nets have moved apart.
+    Figure("fig_early_reuse", (("happo", dict(algo="happo")), ("oappo", dict(algo="oappo")),
+                               ("oappo warm-up 10", dict(algo="oappo", reuse_warmup=10))),
+           common=dict(env=HALFCHEETAH), runs_at=("smoke", "cpu"), budgets={
+               "smoke": MAMUJOCO_SMOKE,
+               "cpu": At(seeds=tuple(range(10)), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    Figure("fig_mamujoco_settings", (("happo", dict(algo="happo")),
+                                     *((f"happo {name}", dict(algo="happo", **kw)) for name, kw in HARL_HALFCHEETAH.items()),
+                                     ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
+                                                                           for k, v in kw.items()}))),
+           common=dict(env=HALFCHEETAH), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # App. A's HAPPO settings on the same robot with one agent (all six joints, the full
+    # observation), beside the two-leg HAPPO: what the split into two agents costs in our loop,
+    # against what our PPO costs against the single-agent anchor (stable-baselines3)
+    Figure("fig_single_agent", (("ppo one agent", dict(algo="happo", env="mamujoco:HalfCheetah-1x6")),
+                                ("happo two legs", dict(algo="happo", env=HALFCHEETAH))),
+           common=dict(ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # App. A's HAPPO against the same with running normalisation of observations, states and
+    # rewards (stable-baselines3's VecNormalize, which the single-agent anchor uses): the rule,
+    # fixed before the runs, for the selection ablation's learner: the one with the higher final IQM
+    Figure("fig_mamujoco_normalize", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
+           common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
+               "smoke": MAMUJOCO_SMOKE, "cpu": APPA_CPU},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    Figure("fig_readings_mamujoco", reading_curves(HALFCHEETAH), runs_at=("cpu",),
+           budgets={"cpu": At(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+)
