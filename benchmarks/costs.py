@@ -1,5 +1,5 @@
 """The committed cost table (``figures/data/costs.csv``) that ``reproduce --plan`` prices a run
-by where no finished run of its kind has a record: for every distinct cost key
+by where no finished run of its type has a record: for every distinct cost key
 (``study.costs.cost_key``) among the runs of the given budgets, one run of that key trained for
 one evaluation period (at most ``CAP`` env steps) and an evaluation, and its CPU and wall
 seconds per 1,000 env steps from its own record (``cpu_s``, ``wall_s``): training per step, and

@@ -29,7 +29,7 @@ FIGURE = {"smax:2s3z": "fig4_smax", "mamujoco:HalfCheetah-2x3": "figA_mamujoco"}
 READINGS = {  # label of the figure's curve, and what changes from it
     "happo": ("happo", {}),
     "oappo a net per agent": ("oappo", {}),
-    "oappo a net per kind": ("oappo type", {}),
+    "oappo a net per type": ("oappo type", {}),
     "oappo one net, seat by seat": ("oappo one seat", {}),
     "oappo a net per agent, always (sigma inf)": ("oappo", {"sigma": float("inf")}),
     "oappo a net per agent, sampled source": ("oappo", {"reuse_mode": "sample"}),

@@ -44,10 +44,10 @@ JaxMARL's side (by hand; its 300k-step 3m run costs about 100 CPU-seconds here):
    ``JAX_PLATFORMS=cpu``. Time it with ``/usr/bin/time -v`` (user + system seconds / env steps
    x 1,000 gives its CPU-s per 1,000 steps).
 
-Measured so (issue 22, 2 cores): the win rates of ``grid.SMAX_ANCHOR`` (on 2s3z no wins before
-~150k, 0.51 at 254k, 0.80 at 303k, 0.96 at 401k); 0.32 (3m) and 0.52 (2s3z) CPU-s per 1,000 env
-steps. The two win rates differ in kind: JaxMARL's is over its training episodes,
-ours over 64 evaluation battles; both policies act stochastically.
+What it measured on 2 cores is ``figures/data/anchor_smax_jaxmarl.csv`` (win rate at the steps,
+seeds, CPU-s per 1,000 env steps; the JSON beside it says how). The two win rates differ in
+kind: JaxMARL's is over its training episodes, ours over 64 evaluation battles; both policies
+act stochastically.
 """
 from __future__ import annotations
 

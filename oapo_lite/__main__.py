@@ -144,7 +144,6 @@ def train_main(argv: list[str]) -> int:
     from oapo_lite.envs.maps import MAPS, parse_maze
     from oapo_lite.neural.config import TrainConfig
     from oapo_lite.neural.train import train
-    from oapo_lite.study.experiments import run_id
 
     parser = train_parser()
     args = vars(parser.parse_args(argv))
@@ -172,7 +171,7 @@ def train_main(argv: list[str]) -> int:
         name = file_name = path.stem
     cfg = TrainConfig(**args)
     _refuse_partial_iteration(parser, cfg)
-    run_dir = out / run_id(cfg, file_name)
+    run_dir = out / cfg.run_id(file_name)
     print(f"run folder: {run_dir}", flush=True)
     start = time.perf_counter()
     rows = train(cfg, run_dir, resume=resume, progress=progress, tensorboard=tensorboard)

@@ -9,6 +9,8 @@ import warnings
 
 import numpy as np
 
+from oapo_lite.renamed import refuse
+
 
 def _check_n(n: int) -> int:
     if int(n) != n or n < 1:
@@ -77,19 +79,19 @@ def oapo_matrix(kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.n
     return m
 
 
-REUSE_KINDS = ("oapo", "own", "uniform")
+REUSE_RULES = ("oapo", "own", "uniform")  # ``AlgoSpec.reuse_rule``
 
 
-def matrix_for(kind: str, kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.ndarray | None = None) -> np.ndarray:
-    """The reuse matrix of an algorithm family (Fig. 2): "oapo" Eq. 9 from ``kl``, "own" HAPPO's
+def matrix_for(reuse_rule: str, kl: np.ndarray, sigma: float, reuse_lambda: float, allowed: np.ndarray | None = None) -> np.ndarray:
+    """The reuse matrix of a reuse rule (Fig. 2): "oapo" Eq. 9 from ``kl``, "own" HAPPO's
     identity, "uniform" MAPPO's 1/n (the last two ignore ``kl``, ``sigma``, ``reuse_lambda``, ``allowed``)."""
-    if kind == "oapo":
+    if reuse_rule == "oapo":
         return oapo_matrix(kl, sigma, reuse_lambda, allowed)
-    if kind == "own":
+    if reuse_rule == "own":
         return happo_matrix(len(kl))
-    if kind == "uniform":
+    if reuse_rule == "uniform":
         return mappo_matrix(len(kl))
-    raise ValueError(f"unknown reuse kind {kind!r}; choose from {list(REUSE_KINDS)}")
+    raise ValueError(f"unknown reuse rule {reuse_rule!r}; choose from {list(REUSE_RULES)}")
 
 
 def categorical_kl(p: np.ndarray, q: np.ndarray, eps: float = 0.0) -> np.ndarray:
@@ -104,26 +106,27 @@ def categorical_kl(p: np.ndarray, q: np.ndarray, eps: float = 0.0) -> np.ndarray
 
 
 # Eq. 9's D_KL^max is a statistic of the per-observation KL over a source's batch. "max" is
-# the paper's; it is an extreme value that grows with the batch (issue 31). "mean" is the
+# the paper's; it is an extreme value that grows with the batch (the gate-statistic study). "mean" is the
 # expected KL, the paper's own relaxation of the max in Section 5.1; "q90" its 90th percentile.
 KL_REDUCES = ("max", "mean", "q90")
 
 
-def reduce_kl(kl: np.ndarray, reduce: str, active: np.ndarray | None = None) -> np.ndarray:
+@refuse({"reduce": "kl_reduce"})
+def reduce_kl(kl: np.ndarray, kl_reduce: str, active: np.ndarray | None = None) -> np.ndarray:
     """Eq. 9's K from per-observation KLs: ``kl[i, j]`` (i, j, batch) are KL(pi_j || pi_i) on
     source j's observations, reduced over the observations where j acted (``active[j]``, all
-    if None) by the statistic ``reduce`` in ``KL_REDUCES``; a source that never acted is at
+    if None) by the gate statistic ``kl_reduce`` in ``KL_REDUCES``; a source that never acted is at
     distance 0 from every learner (nothing to disagree on)."""
-    if reduce not in KL_REDUCES:
-        raise ValueError(f"KL statistic must be one of {list(KL_REDUCES)}, got {reduce!r}")
+    if kl_reduce not in KL_REDUCES:
+        raise ValueError(f"kl_reduce (the gate statistic) must be one of {list(KL_REDUCES)}, got {kl_reduce!r}")
     if active is None:
-        if reduce == "q90":
+        if kl_reduce == "q90":
             return np.quantile(kl, 0.9, axis=-1)
-        return kl.max(-1) if reduce == "max" else kl.mean(-1)
+        return kl.max(-1) if kl_reduce == "max" else kl.mean(-1)
     on = np.broadcast_to(np.asarray(active, dtype=bool)[None], kl.shape)
-    if reduce == "max":  # KL >= 0, so the zeros of inactive samples never win
+    if kl_reduce == "max":  # KL >= 0, so the zeros of inactive samples never win
         return np.where(on, kl, 0.0).max(-1)
-    if reduce == "mean":
+    if kl_reduce == "mean":
         return np.where(on, kl, 0.0).sum(-1) / np.maximum(on.sum(-1), 1)
     with warnings.catch_warnings():  # an all-NaN row (a source that never acted) warns
         warnings.simplefilter("ignore", RuntimeWarning)

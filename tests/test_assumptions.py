@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oapo_lite.study import experiments, figures, verdicts
+from oapo_lite.study import experiments, figures, tables, verdicts
 from oapo_lite.study.statistics import iqm
 
 ASSUMPTIONS = Path(__file__).resolve().parents[1] / "ASSUMPTIONS.md"
@@ -82,18 +82,18 @@ def finals(figure: str, budget: str, env: str) -> dict:
 
 def test_fig4_final_levels():
     level = finals("fig4_smax", "cpu", "smax:2s3z")
-    names = {"oappo type": "per kind", "oappo one seat": "one seat", "mappo": "MAPPO", "oatrpo": "OATRPO",
+    names = {"oappo type": "per type", "oappo one seat": "one seat", "mappo": "MAPPO", "oatrpo": "OATRPO",
              "oappo": "per agent", "happo": "HAPPO"}
     quoted(", ".join(f"{name} {level[label]:.3f}" for label, name in names.items()))
     level = finals("fig4_smax", "cpu", "smax:3s5z_vs_3s6z")
-    quoted(f"MAPPO {level['mappo']:.3f}, per kind {level['oappo type']:.3f}, HAPPO {level['happo']:.3f}")
+    quoted(f"MAPPO {level['mappo']:.3f}, per type {level['oappo type']:.3f}, HAPPO {level['happo']:.3f}")
     level = finals("fig4_smax", "cpu", "smax:3m")
     quoted(f"final IQM SePS {level['seps']:.3f}, SEAC {level['seac']:.3f}")
 
 
 def _sweep(figure: str):
     family = {label: re.split(r" lr=", label)[0] for label, _ in figures.get_figure(figure).curves}
-    return verdicts.sweep_table(metric_rows(figure, "cpu"), family, verdicts.WIN_RATE)
+    return tables.sweep_table(metric_rows(figure, "cpu"), family, verdicts.WIN_RATE)
 
 
 def test_sweep_on_2s3z():

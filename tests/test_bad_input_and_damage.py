@@ -27,7 +27,7 @@ from oapo_lite.neural.losses import Diverged
 from oapo_lite.neural.results import learning
 from oapo_lite.neural.runstate import RunState, load_checkpoint
 from oapo_lite.neural.train import _diverged_at, train
-from oapo_lite.study import experiments, figures, plotting, statistics, verdicts
+from oapo_lite.study import experiments, figures, plotting, statistics, tables, verdicts
 from oapo_lite.study.executors import train_job
 
 QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
@@ -156,8 +156,8 @@ def test_run_folders_carry_the_config_hash_so_settings_never_collide(tmp_path, c
     folders = sorted(p.name for p in tmp_path.iterdir())
     cfgs = [TrainConfig(algo="oappo", env="black_red", n_envs=8, rollout_len=25, steps=400, eval_episodes=4, lr=lr)
             for lr in (5e-4, 1e-3)]
-    assert folders == sorted(experiments.run_id(c) for c in cfgs) and len(set(folders)) == 2
-    assert f"run folder: {tmp_path / experiments.run_id(cfgs[0])}" in capsys.readouterr().out
+    assert folders == sorted(c.run_id() for c in cfgs) and len(set(folders)) == 2
+    assert f"run folder: {tmp_path / cfgs[0].run_id()}" in capsys.readouterr().out
 
 
 def test_resuming_past_the_asked_steps_names_no_resume(tmp_path, capsys):
@@ -719,7 +719,7 @@ def test_reading_results_never_writes(tmp_path, monkeypatch):
 def test_the_statistics_take_a_frame_with_no_run(tmp_path):
     empty = pd.DataFrame()
     assert verdicts.per_run(empty).empty and list(verdicts.per_run(empty).columns) == verdicts.PER_RUN_COLUMNS
-    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty and verdicts.reuse_summary(empty).empty
+    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty and tables.reuse_summary(empty).empty
     assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
     assert np.isnan(statistics.probability_of_improvement([np.nan, np.nan], [1, 2]))
     assert statistics.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
@@ -863,14 +863,14 @@ def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path,
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
     (cfg,) = [cfg for _, cfg in figures.figure_runs("fig1", "smoke")]
-    lock = experiments.runs_dir("smoke") / "checkpoints" / experiments.run_id(cfg) / ".lock"
+    lock = experiments.runs_dir("smoke") / "checkpoints" / cfg.run_id() / ".lock"
     lock.mkdir(parents=True)
     assert reproduce.main(["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]) == 1
     err = capsys.readouterr().err
     assert f"error: the lock file {lock} is a folder; delete it" in err and "Traceback" not in err
     out = tmp_path / "runs"
     quick = TrainConfig(n_envs=8, rollout_len=25, steps=400, eval_episodes=4)  # QUICK's run
-    (out / experiments.run_id(quick) / ".lock").mkdir(parents=True)
+    (out / quick.run_id() / ".lock").mkdir(parents=True)
     assert "is a folder; delete it" in _cli_error(capsys, "train", *QUICK, "--out", str(out))
 
 
@@ -883,7 +883,7 @@ def test_the_tables_take_no_rows_and_name_what_they_lack():
     for table in (claims.summary, claims.summary_lines, claims.conclusion, claims.readme_markdown):
         with pytest.raises(ValueError, match=r"the claims lack the columns \['section', 'claim', 'verdict'"):
             table(pd.DataFrame())
-    assert verdicts.reuse_table(pd.DataFrame(), "eval_success", {}).empty
+    assert tables.reuse_table(pd.DataFrame(), "eval_success", {}).empty
     with pytest.raises(ValueError, match=r"no runs labelled \['a', 'b'\] to pair; the runs' labels are \[\]"):
         verdicts.paired_difference(pd.DataFrame(), "a", "b", "frac_opt")
     one = pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": [1.0]})
@@ -951,8 +951,8 @@ def test_a_checkpoint_missing_or_garbling_an_entry_is_damaged_named_and_trained_
     (lambda: verdicts.per_run(pd.DataFrame(), tail=5), "tail = 5 is invalid; allowed: a share"),
     (lambda: verdicts.paired_difference(_two_curves(), "a", "a", "frac_opt"), "a and b are both 'a'"),
     (lambda: verdicts.paired_difference(_two_curves(b_seed=7), "a", "b", "frac_opt"), "no seed has runs of both"),
-    (lambda: verdicts.reuse_table(_two_curves().drop(columns="env"), "frac_opt", {}), "lack the columns ['env']"),
-    (lambda: verdicts.reuse_table(_two_curves(), "frac_opt", {}), "owners names no network of each seat"),
+    (lambda: tables.reuse_table(_two_curves().drop(columns="env"), "frac_opt", {}), "lack the columns ['env']"),
+    (lambda: tables.reuse_table(_two_curves(), "frac_opt", {}), "owners names no network of each seat"),
     (lambda: claims_module().summary(None), "must be glance()'s DataFrame, got NoneType"),
     (lambda: claims_module().summary(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["held?"]})),
      "verdicts ['held?'] that are no status"),

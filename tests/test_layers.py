@@ -94,7 +94,22 @@ def test_no_module_imports_itself_back_through_others():
 
 def test_the_shared_parts_outside_the_layer_folders_are_few():
     top = {m for m in graph() if layer(m) == "shared" and m.count(".") == 1}
-    assert top == {"oapo_lite.algorithms", "oapo_lite.cli", "oapo_lite.envs", "oapo_lite.reuse", "oapo_lite.store"}
+    assert top == {"oapo_lite.algorithms", "oapo_lite.cli", "oapo_lite.envs", "oapo_lite.renamed", "oapo_lite.reuse",
+                   "oapo_lite.store"}
+
+
+def test_the_train_command_reaches_no_study_module():
+    """A run's identity lives beside its config: ``python -m oapo_lite train`` needs nothing of
+    the study layer, through any chain of imports."""
+    main = ast.parse((PACKAGE / "__main__.py").read_text())
+    (fn,) = [n for n in ast.walk(main) if isinstance(n, ast.FunctionDef) and n.name == "train_main"]
+    g, todo = graph(), {n.module for n in ast.walk(fn) if isinstance(n, ast.ImportFrom)}
+    reached = set()
+    while todo:
+        m = todo.pop()
+        reached.add(m)
+        todo |= g.get(m, set()) - reached
+    assert reached and not {m for m in reached if layer(m) == "study"}, sorted(reached)
 
 
 @pytest.mark.parametrize("where, line, words", [

@@ -166,3 +166,52 @@ def test_every_exercise_keeps_its_answer_folded_until_unfolded():
             assert solution.metadata.get("jupyter") == {"source_hidden": True, "outputs_hidden": True}, (path.name, i)
             assert "hide-cell" in solution.metadata.get("tags", []), (path.name, i)
     assert found >= 15
+
+
+# What notebook 05 rebuilds Algorithm 1 from: the learner's internals it imports, each with the
+# signature it calls. A change to one of them is a change to the notebook too: make both, then
+# this table.
+NOTEBOOK_05_USES = {
+    "oapo_lite.neural.ppo_family": {
+        "LearnerBatch": "(net: 'int', rows: 'list[int]', own: 'list[int]', w: 'torch.Tensor', act: 'torch.Tensor', "
+                        "logp_old: 'torch.Tensor', kl_w: 'torch.Tensor', active: 'torch.Tensor | None' = None, "
+                        "distinct: 'tuple[torch.Tensor, torch.Tensor] | None' = None) -> None",
+        "advantages": "(critic: 'Critic', value_norm: 'ValueNorm', batch: 'Rollout', cfg: 'TrainConfig', bootstrap: 'bool')",
+        "learner_dists": "(actors: 'Actors', inputs: 'Inputs', src: 'LearnerBatch', idx=slice(None, None, None)) "
+                         "-> 'torch.Tensor'",
+        "policy_distances": "(actors: 'Actors', inputs: 'Inputs', owner: 'list[int]', kl_reduce: 'str', "
+                            "active: 'torch.Tensor | None' = None) -> 'np.ndarray'",
+        "ppo_update": "(actors: 'Actors', opt: 'torch.optim.Optimizer', inputs: 'Inputs', src: 'LearnerBatch', "
+                      "factor: 'torch.Tensor', adv: 'torch.Tensor', cfg: 'TrainConfig', rng: 'np.random.Generator') "
+                      "-> 'float'",
+        "trpo_update": "(actors: 'Actors', inputs: 'Inputs', src: 'LearnerBatch', factor: 'torch.Tensor', "
+                       "adv: 'torch.Tensor', cfg: 'TrainConfig') -> 'tuple[float, float]'",
+        "update_actors": "(actors: 'Actors', opts: 'list', batch: 'Rollout', units: 'list', order, adv: 'torch.Tensor', "
+                         "spec: 'AlgoSpec', cfg: 'TrainConfig', rng: 'np.random.Generator')",
+        "update_units": "(W: 'np.ndarray', owner: 'list[int]', by: 'str') -> 'list[tuple[int, np.ndarray, list[int]]]'",
+    },
+    "oapo_lite.neural.losses": {
+        "off_agent_objective": "(logp_new: 'torch.Tensor', logp_old: 'torch.Tensor', weights: 'torch.Tensor', "
+                               "factor: 'torch.Tensor', adv: 'torch.Tensor', clip: 'float | None', "
+                               "active: 'torch.Tensor | None' = None) -> 'torch.Tensor'",
+        "update_factor": "(factor: 'torch.Tensor', logp_new_own: 'torch.Tensor', logp_old_own: 'torch.Tensor', "
+                         "active_own: 'torch.Tensor | None' = None) -> 'torch.Tensor'",
+    },
+}
+
+
+def test_notebook_05_uses_the_learner_internals_pinned_here_with_their_signatures():
+    import ast
+    import importlib
+    import inspect
+
+    notebook = next(p for p in NOTEBOOKS if p.name.startswith("05_"))
+    code = "\n".join(c.source for c in nbformat.read(notebook, as_version=4).cells if c.cell_type == "code")
+    imported = {}
+    for node in ast.walk(ast.parse(code)):
+        if isinstance(node, ast.ImportFrom) and node.module in NOTEBOOK_05_USES:
+            imported.setdefault(node.module, set()).update(a.name for a in node.names)
+    assert imported == {m: set(names) for m, names in NOTEBOOK_05_USES.items()}
+    for module, names in NOTEBOOK_05_USES.items():
+        for name, signature in names.items():
+            assert str(inspect.signature(getattr(importlib.import_module(module), name))) == signature, (module, name)

@@ -170,7 +170,7 @@ def test_matrix_for_dispatches_and_rejects_unknown_kinds():
     assert np.array_equal(reuse.matrix_for("oapo", kl, 0.2, 0.6), reuse.oapo_matrix(kl, 0.2, 0.6))
     assert np.array_equal(reuse.matrix_for("own", kl, 0.2, 0.6), np.eye(3))
     assert np.allclose(reuse.matrix_for("uniform", kl, 0.2, 0.6), 1 / 3)
-    with pytest.raises(ValueError, match="unknown reuse kind 'shared'"):
+    with pytest.raises(ValueError, match="unknown reuse rule 'shared'"):
         reuse.matrix_for("shared", kl, 0.2, 0.6)
 
 

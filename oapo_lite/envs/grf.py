@@ -260,8 +260,8 @@ class GRFVec:
 
 
 def agent_types(name: str) -> tuple[str, ...]:
-    """The kind of each seat of scenario ``name``, without starting an engine: HARL's players keep
-    their own roles, so each seat is its own kind (and named for it)."""
+    """The agent type of each seat of scenario ``name``, without starting an engine: HARL's players keep
+    their own roles, so each seat is its own type (and named for it)."""
     check(name)
     return tuple(f"player_{k}" for k in range(SCENARIOS[name]))
 

@@ -1,4 +1,4 @@
-"""Generated two-agent mazes for the layout study (issue 12): one parameter varied at a time.
+"""Generated two-agent mazes for the layout study: one parameter varied at a time.
 
 Every layout is a *fork*: red and black start on one cell, walk ``prefix`` moves up a shared
 column, reach a horizontal fork corridor where red must go left and black right, climb

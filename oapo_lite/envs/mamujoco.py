@@ -98,7 +98,7 @@ class MaMuJoCoVec(PettingZooVec):
     def __init__(self, env_fn, n_envs: int, seed: int = 0, max_steps: int | None = None):
         super().__init__(env_fn, n_envs, seed=seed, max_steps=max_steps)
         first = self.envs[0]
-        # equal spaces, but each agent moves its own body part (back leg, front leg): its own kind
+        # equal spaces, but each agent moves its own body part (back leg, front leg): its own type
         self.agent_types = self.agents
         self._obs_index = [np.asarray(first.observation_factorization[a]) for a in self.agents]
         act = np.array([[part.act_ids for part in parts] for parts in first.agent_action_partitions])

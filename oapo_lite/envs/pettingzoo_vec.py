@@ -53,7 +53,7 @@ class PettingZooVec:
         self.seed = int(seed)
         first = self.envs[0]
         self.agents = tuple(first.possible_agents)
-        # every seat its own kind unless the env says otherwise (``agent_types``: one name per seat)
+        # every seat its own type unless the env says otherwise (``agent_types``: one name per seat)
         self.agent_types = tuple(getattr(first, "agent_types", self.agents))
         if len(self.agent_types) != len(self.agents):
             raise ValueError(f"the env's agent_types {list(self.agent_types)} must name one type per agent "

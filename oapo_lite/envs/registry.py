@@ -69,7 +69,7 @@ def make_vec(spec: str, n_envs: int, seed: int, max_steps: int):
 
 
 def agent_types(spec: str, max_steps: int) -> tuple[str, ...]:
-    """The kind of each seat of ``spec`` (``env.agent_types``), from the engine's scenario where it
+    """The agent type of each seat of ``spec`` (``env.agent_types``), from the engine's scenario where it
     can tell without building (SMAX: no compile), else from a one-copy env."""
     prefix, name = split(spec)
     engine = None if prefix is None else _engine(prefix)

@@ -42,7 +42,7 @@ class VecEnv(Protocol):
 
     n_envs: int
     agents: Sequence[str]  # seat names
-    agent_types: Sequence[str]  # the kind of each seat: seats of one kind may share a network (TrainConfig.networks)
+    agent_types: Sequence[str]  # the agent type of each seat: seats of one type may share a network (TrainConfig.networks)
     n_agents: int
     n_actions: int  # per seat; the size of a Box action
     obs_dim: int

@@ -30,9 +30,11 @@ from oapo_lite import reuse
 from oapo_lite.envs.vec import seat_spaces
 from oapo_lite.neural import seps
 from oapo_lite.neural.adam import Adam
-from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.config import TrainConfig, derive_seed
+from oapo_lite.neural.learner import Update
 from oapo_lite.neural.losses import check_finite, explained_variance, source_mean, update_diagnostics
 from oapo_lite.neural.nets import Actors, Critic
+from oapo_lite.neural.rollout import Rollout
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +100,7 @@ def seac_loss(logp: torch.Tensor, logp_behaviour: torch.Tensor, value: torch.Ten
 
 class A2C:
     """The A2C learner of SEAC and SePS: critics V(o) beside ``actors`` (one per network), one
-    Adam per network over actor and critic, and ``learn(batch, next_obs, owner)``.
+    Adam per network over actor and critic, and ``step(batch, owner)``.
 
     ``seac_lambda`` is SEAC's lambda (0: each network learns from its own seats only)."""
 
@@ -116,20 +118,20 @@ class A2C:
         """(len(nets), M): V_c(obs) for every net c in ``nets``; ``obs`` (M, obs_dim)."""
         return torch.stack([self.critics[c](obs) for c in nets])
 
-    def returns(self, batch, next_obs: torch.Tensor, owner: list[int]) -> torch.Tensor:
-        """(n, B): each seat's n-step returns bootstrapped by its own network's critic on
-        ``next_obs`` (N, n, obs_dim), the observations after the rollout."""
+    def returns(self, batch: Rollout, owner: list[int]) -> torch.Tensor:
+        """(n, B): each seat's n-step returns bootstrapped by its own network's critic on the
+        observations after the rollout (``batch.next_obs``)."""
         with torch.no_grad():
-            last = torch.stack([self.critics[c](next_obs[:, k]) for k, c in enumerate(owner)])
+            last = torch.stack([self.critics[c](batch.next_obs[:, k]) for k, c in enumerate(owner)])
         done = (batch.terminated | batch.truncated)[:, None]  # (T, 1, N): every seat's episode ends together
         R = nstep_returns(batch.reward[:, None], done, last, self.gamma)  # (T, n, N)
         return R.transpose(0, 1).reshape(len(owner), -1)
 
-    def learn(self, batch, next_obs: torch.Tensor, owner: list[int]) -> tuple[dict, list]:
-        """One A2C step of every network that controls a seat, on ``batch`` (a ``train.Rollout``):
-        (metrics, ``diagnostics``)."""
+    def step(self, batch: Rollout, owner: list[int]) -> tuple[dict, list]:
+        """One A2C step of every network that controls a seat, on ``batch``: (metrics,
+        ``diagnostics``)."""
         inputs, head = batch.inputs, self.actors.head
-        returns = self.returns(batch, next_obs, owner)
+        returns = self.returns(batch, owner)
         check_finite(returns, "the n-step returns", "all: they share the team reward")
         nets = sorted(set(owner))
         # every used net on every distinct input in one batched forward, gathered per seat
@@ -193,7 +195,7 @@ class A2CFamilyLearner:
     SePS, the pre-training phase on one shared network followed by the switch to one network per
     cluster. ``owner`` (seat -> network) is what the rollouts and evaluations act with."""
 
-    def __init__(self, cfg, env, actors: Actors, gen: torch.Generator):
+    def __init__(self, cfg, env, actors: Actors, gen: torch.Generator, owner: list[int]):
         n, self.seps, self.agents = env.n_agents, cfg.algo == "seps", list(env.agents)
         if self.seps and cfg.seps_clusters is not None and not 1 <= cfg.seps_clusters <= n:
             raise ValueError(f"seps_clusters = {cfg.seps_clusters} is invalid for {n} agents; allowed: None or 1..{n}")
@@ -205,7 +207,7 @@ class A2CFamilyLearner:
         self.cfg, self.n_actions = cfg, env.n_actions
         self.a2c = A2C(actors, env.obs_dim, cfg.hidden, cfg.seac_lambda if cfg.algo == "seac" else 0.0, cfg.gamma,
                        cfg.a2c_lr, cfg.a2c_adam_eps, cfg.a2c_max_grad_norm, cfg.entropy_coef, gen)
-        self.owner = [0] * n if self.seps else list(range(n))
+        self.owner = [0] * n if self.seps else owner  # SePS pre-trains every seat on network 0
         self.pretrain_iters = cfg.seps_pretrain_steps // (cfg.n_envs * cfg.n_step) if self.seps else 0
         self.buffer = seps.Buffer() if self.seps else None
         self.embeddings, self.db_scores = None, {}
@@ -214,28 +216,27 @@ class A2CFamilyLearner:
     def groups(self) -> str:
         return seps.group_names(self.owner, self.agents)
 
-    def learn(self, batch, step, it: int) -> tuple[dict, dict]:
-        """Iteration ``it``'s update on ``batch``; ``step`` is the env step after the rollout.
-        Returns (metrics for the results rows, the live diagnostics of each network for the history)."""
-        next_obs = torch.from_numpy(step.obs)
+    def learn(self, batch: Rollout, it: int, wanted: frozenset[str] = frozenset()) -> Update:
+        """Iteration ``it``'s update on ``batch`` (``learner.Learner``; this family has nothing
+        ``wanted`` may ask for): the results rows' metrics, each network's live diagnostics."""
         if self.buffer is not None:
-            self._record(batch, next_obs)
-        metrics, learners = self.a2c.learn(batch, next_obs, self.owner)
+            self._record(batch)
+        metrics, learners = self.a2c.step(batch, self.owner)
         if self.buffer is not None and it + 1 == self.pretrain_iters:
             self._regroup()
         returns = batch.episode_returns
         metrics = {"train_return": sum(returns) / len(returns) if returns else float("nan"), **metrics}
-        return ({**metrics, "seps_groups": self.groups} if self.seps else metrics), {"learners": learners}
+        return Update({**metrics, "seps_groups": self.groups} if self.seps else metrics, {"learners": learners})
 
     def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
         """Every optimiser with its learning rate before annealing."""
         return [(opt, self.cfg.a2c_lr) for opt in self.a2c.opts]
 
-    def _record(self, batch, next_obs: torch.Tensor) -> None:
+    def _record(self, batch: Rollout) -> None:
         """Store (o, a, o', r, id); o' of the last step is the observation after the rollout
         (after an auto-reset where the episode ended, as in the reference code)."""
         obs = batch.inputs.obs[batch.inputs.index]  # (n, B, d)
-        nxt = torch.cat([obs[:, next_obs.shape[0]:], next_obs.transpose(0, 1)], 1)
+        nxt = torch.cat([obs[:, batch.next_obs.shape[0]:], batch.next_obs.transpose(0, 1)], 1)
         act = batch.act.float() if self.a2c.actors.head.continuous \
             else torch.nn.functional.one_hot(batch.act, self.n_actions).float()
         self.buffer.record(obs, act, nxt, batch.reward.reshape(-1), batch.active)
@@ -244,7 +245,7 @@ class A2CFamilyLearner:
         """End of pre-training: embed the agents, cluster them, and give every cluster a copy of
         the pre-trained network (actor, critic, Adam state)."""
         agent, obs, act, nxt, reward = self.buffer.arrays()
-        key = np.random.SeedSequence([self.cfg.seed, 4]).generate_state(1)[0]
+        key = derive_seed(self.cfg.seed, 4)
         self.embeddings = seps.agent_embeddings(agent, obs, act, nxt, reward, len(self.owner), int(key))
         labels, self.db_scores = seps.choose_groups(self.embeddings, self.cfg.seps_clusters,
                                                     np.random.default_rng(key))

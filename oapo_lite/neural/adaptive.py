@@ -1,4 +1,4 @@
-"""Adaptive reuse (issue 12, the paper's Section 7 future work): Eq. 9's weights scaled online by
+"""Adaptive reuse (the paper's Section 7 future work): Eq. 9's weights scaled online by
 gradient agreement.
 
 Eq. 9 decides reuse from policy distance alone. On Black-Red that signal misses the trap:

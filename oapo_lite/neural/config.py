@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import numbers
@@ -17,7 +18,7 @@ from oapo_lite.neural import adaptive
 from oapo_lite.reuse import KL_REDUCES, SCHEMES
 
 
-NETWORKS = ("agent", "type", "one")  # one network per seat, per kind of seat, for every seat
+NETWORKS = ("agent", "type", "one")  # one network per seat, per agent type, for every seat
 
 
 # The fields only some algorithms read; every other field applies to every run. A run refuses a
@@ -36,7 +37,7 @@ def readers(name: str) -> list[str]:
     """The algorithms that read field ``name`` (all of them for a field every run reads)."""
     if name in ONLY:
         return list(ONLY[name])
-    spec_ok = {EQ9_FIELDS: lambda s: s.reuse == "oapo", TRPO_FIELDS: lambda s: s.trust_region,
+    spec_ok = {EQ9_FIELDS: lambda s: s.reuse_rule == "oapo", TRPO_FIELDS: lambda s: s.trust_region,
                A2C_FIELDS: lambda s: s.a2c, A2C_IGNORES: lambda s: not s.a2c}
     for fields, ok in spec_ok.items():
         if name in fields:
@@ -56,6 +57,11 @@ def _is_real(x) -> bool:
 # SMAX's key is the seed's 32 bits, torch's generators take 64. The streams derived from a seed
 # (actions, evaluation episodes, a GRF copy's engine) are SeedSequence hashes of (seed, purpose).
 MAX_SEED = 2**32 - 1
+
+
+def derive_seed(*keys: int) -> int:
+    """A seed for one purpose of a run (evaluation episodes, action sampling, ...), from its seed."""
+    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0])
 
 # fields renamed since runs were first recorded (old name -> new): the command line names the new one
 RENAMED = {"lam": "reuse_lambda"}
@@ -112,8 +118,8 @@ class TrainConfig:
     allowed: object = _field(None, "which seats may reuse which (applied on top of Eq. 9's gate)",
                              f"None, an (n, n) bool mask or a scheme in {list(SCHEMES)}")
     networks: str | None = _field(
-        None, "the actors' networks: agent, one per seat; type, one per kind of seat (Eq. 9 then gates reuse across "
-              "kinds); one, one for every seat; None: the algorithm's own (MAPPO one, the others one per seat)",
+        None, "the actors' networks: agent, one per seat; type, one per agent type (Eq. 9 then gates reuse across "
+              "types); one, one for every seat; None: the algorithm's own (MAPPO one, the others one per seat)",
         f"None or one of {list(NETWORKS)}")
     reuse_adapt: str | None = _field(
         None, "None: Eq. 9 as written; else Eq. 9's weights scaled online by the agreement of each source's "
@@ -219,7 +225,7 @@ class TrainConfig:
              "reuse_adapt")
         if self.reuse_adapt is not None:
             # the rule rescales Eq. 9's matrix between separate learners
-            need(self.network_kind == "agent" and self.update_by == "net", "reuse_adapt",
+            need(self.networks_used == "agent" and self.update_by == "net", "reuse_adapt",
                  "None unless every seat has its own network, updated once (networks='agent', update_by='net')")
             need(self.n_envs >= adaptive.folds(self.reuse_adapt), "n_envs",
                  f">= {adaptive.folds(self.reuse_adapt)} with reuse_adapt={self.reuse_adapt!r} (its env-copy folds)")
@@ -257,9 +263,9 @@ class TrainConfig:
         return self.n_step if ALGOS[self.algo].a2c else self.rollout_len
 
     @property
-    def network_kind(self) -> str:
-        """Whose seats share a network (``NETWORKS``): ``networks``, else the algorithm's choice."""
-        return self.networks or ("one" if ALGOS[self.algo].shared else "agent")
+    def networks_used(self) -> str:
+        """The networks reading the run trains (``NETWORKS``): ``networks``, else the algorithm's."""
+        return self.networks or ALGOS[self.algo].networks
 
     @property
     def iteration_steps(self) -> int:
@@ -296,6 +302,21 @@ class TrainConfig:
             d["env"] = self.env.strip().replace("\n", "/")  # a map text, on one CSV line
         return d
 
+    def changed(self) -> dict:
+        """The fields (``flat``) that differ from ``TrainConfig``'s defaults."""
+        defaults = TrainConfig().flat()
+        return {k: v for k, v in self.flat().items() if str(v) != str(defaults[k])}
+
+    def run_id(self, env_name: str | None = None) -> str:
+        """The run's identity: the name of its cached result (and of a command-line run's
+        folder): the algorithm, env (``env_name`` if given: a map file's name) and seed, and a
+        hash of the fields that differ from the defaults (``changed``). Hashing only those keeps
+        every cached run valid when a new field is added with a default that reproduces the old
+        behaviour; changing an existing default, on the other hand, must come with a new cache."""
+        blob = json.dumps(self.changed(), sort_keys=True, default=str)
+        env = env_name or ("map" if "\n" in self.env else self.env)
+        env = env.replace(":", "_")  # an engine's env spec ("smax:3m") as a portable file name
+        return f"{self.algo}-{env}-s{self.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
 
 
 ALLOWED = {f.name: f.metadata["allowed"] for f in dataclasses.fields(TrainConfig)}

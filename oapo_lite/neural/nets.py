@@ -19,17 +19,18 @@ from oapo_lite.neural.config import NETWORKS
 UNAVAILABLE_LOGIT = -1e10  # as in HARL: masked actions keep a finite logit, so 0 * logit stays 0
 
 
-def owners(kind: str, agent_types) -> list[int]:
-    """The network of every seat (``TrainConfig.networks``): "agent" one each, "one" the same
-    for all, "type" one per kind of seat in ``agent_types``, numbered as the kinds first appear."""
-    if kind == "agent":
+def owners(networks: str, agent_types) -> list[int]:
+    """The owner map, the network of every seat, under a networks reading
+    (``TrainConfig.networks``): "agent" one each, "one" the same for all, "type" one per agent
+    type in ``agent_types``, numbered as the types first appear."""
+    if networks == "agent":
         return list(range(len(agent_types)))
-    if kind == "one":
+    if networks == "one":
         return [0] * len(agent_types)
-    if kind == "type":
-        kinds = list(dict.fromkeys(agent_types))
-        return [kinds.index(t) for t in agent_types]
-    raise ValueError(f"unknown network kind {kind!r}; choose from {list(NETWORKS)}")
+    if networks == "type":
+        types = list(dict.fromkeys(agent_types))
+        return [types.index(t) for t in agent_types]
+    raise ValueError(f"unknown networks reading {networks!r}; choose from {list(NETWORKS)}")
 
 
 def _orthogonal(shape: tuple[int, int], gain: float, gen: torch.Generator) -> torch.Tensor:

@@ -18,11 +18,13 @@ from oapo_lite.envs.vec import seat_spaces
 from oapo_lite.neural import adaptive
 from oapo_lite.neural.adam import Adam
 from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.learner import Update
 from oapo_lite.neural.losses import (Diverged, check_finite, explained_variance, gae, normalise, off_agent_objective,
                                      source_mean, update_diagnostics, update_factor, value_loss, weighted_kl)
-from oapo_lite.neural.nets import Actors, Critic, ValueNorm, owners
+from oapo_lite.neural.nets import Actors, Critic, ValueNorm
 from oapo_lite.neural.rollout import Inputs, Rollout, States, mean_or_nan
 from oapo_lite.neural.trpo import trpo_step
+from oapo_lite.renamed import refuse
 
 
 @dataclass
@@ -174,12 +176,24 @@ def pairwise_distances(actors: Actors, inputs: Inputs, owner: list[int]) -> np.n
     return actors.head.pairwise_kl(d)
 
 
-def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], reduce: str,
+@refuse({"reduce": "kl_reduce"})
+def policy_distances(actors: Actors, inputs: Inputs, owner: list[int], kl_reduce: str,
                      active: torch.Tensor | None = None) -> np.ndarray:
     """Eq. 9's K[i, j] = KL(pi_j || pi_i) on seat j's observations (those where j acted, if
-    ``active`` (n, B) is given), reduced by the statistic ``reduce`` (``reuse.KL_REDUCES``)."""
-    kl = pairwise_distances(actors, inputs, owner)
-    return _finite_distances(reuse.reduce_kl(kl, reduce, None if active is None else active.numpy()))
+    ``active`` (n, B) is given), reduced by the statistic ``kl_reduce`` (``reuse.KL_REDUCES``)."""
+    return reduced_distances(pairwise_distances(actors, inputs, owner), kl_reduce,
+                             None if active is None else active.numpy())
+
+
+@refuse({"reduce": "kl_reduce"})
+def reduced_distances(kl: np.ndarray, kl_reduce: str, active: np.ndarray | None) -> np.ndarray:
+    """Eq. 9's K from the per-observation KLs (``pairwise_distances``) by the statistic ``kl_reduce``;
+    a K that is not finite raises, naming the pair."""
+    K = reuse.reduce_kl(kl, kl_reduce, active)
+    bad = np.argwhere(~np.isfinite(K))
+    if len(bad):
+        raise Diverged(f"the policy distance KL K[{bad[0][0]}, {bad[0][1]}] (Eq. 9)", bad[0][0])
+    return K
 
 
 def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarray, adv: torch.Tensor,
@@ -214,13 +228,6 @@ def source_gradients(actors: Actors, inputs: Inputs, batch: Rollout, M: np.ndarr
                 grads[i, j, f] = torch.cat([x.reshape(-1) for x in g]).double().numpy()
     check_finite(grads, "a source gradient of the adaptive reuse rule", "all")
     return grads
-
-
-def _finite_distances(K: np.ndarray) -> np.ndarray:
-    bad = np.argwhere(~np.isfinite(K))
-    if len(bad):
-        raise Diverged(f"the policy distance KL K[{bad[0][0]}, {bad[0][1]}] (Eq. 9)", bad[0][0])
-    return K
 
 
 def update_units(W: np.ndarray, owner: list[int], by: str) -> list[tuple[int, np.ndarray, list[int]]]:
@@ -283,15 +290,14 @@ class PPOFamilyLearner:
     iteration's update (Algorithm 1 lines 4-9, then the critic); ``owner[k]`` is the net of seat k.
     The critic's initialisation follows the actors' in the generator."""
 
-    def __init__(self, cfg: TrainConfig, env, actors: Actors, gen: torch.Generator):
-        self.cfg, self.spec, self.actors = cfg, ALGOS[cfg.algo], actors
+    def __init__(self, cfg: TrainConfig, env, actors: Actors, gen: torch.Generator, owner: list[int]):
+        self.cfg, self.spec, self.actors, self.owner = cfg, ALGOS[cfg.algo], actors, owner
         n = env.n_agents
-        self.owner = owners(cfg.network_kind, env.agent_types)
         self.allowed = reuse.allowed_mask(cfg.allowed, env.agents)
         same_net = np.equal.outer(self.owner, self.owner)  # seats of one network need equal spaces too
         pairs = {"uniform": np.ones((n, n), bool),
                  "oapo": same_net | (np.ones((n, n), bool) if self.allowed is None else self.allowed)}
-        reuse.check_spaces(env.agents, seat_spaces(env), pairs.get(self.spec.reuse, same_net))
+        reuse.check_spaces(env.agents, seat_spaces(env), pairs.get(self.spec.reuse_rule, same_net))
         # the mazes' state holds t / max_steps: their time limit is part of the game, its end terminal
         self.bootstrap = not env.time_in_state if cfg.bootstrap_truncation is None else cfg.bootstrap_truncation
         self.critic = Critic(env.state_dim, cfg.hidden, gen, cfg.feature_norm)
@@ -303,20 +309,21 @@ class PPOFamilyLearner:
         self.critic_opt = Adam(self.critic.parameters(), lr=cfg.critic_lr, eps=1e-5)
         self.rng = np.random.default_rng(cfg.seed)  # update order, reuse mapping, minibatches
 
-    def learn(self, batch: Rollout, step, it: int) -> tuple[dict, dict]:
-        """Iteration ``it``'s update on ``batch`` (``step`` is not read: the critic bootstraps from
-        the batch's final states): (metrics for the results rows, per-iteration detail for the
-        history: the KL of every accepted trust-region step)."""
+    def learn(self, batch: Rollout, it: int, wanted: frozenset[str] = frozenset()) -> Update:
+        """Iteration ``it``'s update on ``batch`` (``learner.Learner``); ``wanted``: "kl", "pairwise_kl"
+        (``learner.WANTS``)."""
         cfg, spec, actors, n = self.cfg, self.spec, self.actors, len(self.owner)
         # Algorithm 1 line 4: the joint advantage (the loop's rollout was line 3)
         adv, returns, v_old = advantages(self.critic, self.value_norm, batch, cfg, self.bootstrap)
-        # K feeds Eq. 9 only for OAPO; for the others it is a logged column, which the results
-        # read at evaluations alone (every eval_every-th iteration), so it is skipped elsewhere
-        K = (policy_distances(actors, batch.inputs, self.owner, cfg.kl_reduce, batch.active)
-             if spec.reuse == "oapo" or cfg.evaluates(it + 1) else np.full((n, n), np.nan))
+        # K feeds Eq. 9 only for OAPO; for the others it is computed when asked for
+        active = None if batch.active is None else batch.active.numpy()
+        kl = (pairwise_distances(actors, batch.inputs, self.owner)
+              if spec.reuse_rule == "oapo" or wanted & {"kl", "pairwise_kl"} else None)
+        K = (reduced_distances(kl, cfg.kl_reduce, active)
+             if spec.reuse_rule == "oapo" or "kl" in wanted else np.full((n, n), np.nan))
         # line 5: omega, the distribution of reuse sequences, as the matrix M of Eq. 9
         M = (np.eye(n) if it < cfg.reuse_warmup  # the control: no reuse while untrained nets look alike
-             else reuse.matrix_for(spec.reuse, K, cfg.sigma, cfg.reuse_lambda, self.allowed))
+             else reuse.matrix_for(spec.reuse_rule, K, cfg.sigma, cfg.reuse_lambda, self.allowed))
         if cfg.reuse_adapt is not None:
             G = source_gradients(actors, batch.inputs, batch, M, adv, None if spec.trust_region else cfg.clip,
                                  adaptive.folds(cfg.reuse_adapt))
@@ -336,19 +343,19 @@ class PPOFamilyLearner:
             "train_return": mean_or_nan(batch.episode_returns),
             "objective": float(np.mean(objectives)), "value_loss": critic_loss,
             "trpo_kl": mean_or_nan(accepted), "trpo_accepted": len(accepted),
-            "kl_matrix": np.round(K, 6), "reuse_matrix": np.round(M, 6),
+            "kl_matrix": K, "reuse_matrix": M,
             # reuse made visible at every iteration (the matrices reach the results rows at evaluations only)
-            "peer_share": round(reuse.peer_share(M), 6), "kl_nearest": np.round(reuse.nearest_peer(K), 6),
+            "peer_share": reuse.peer_share(M), "kl_nearest": reuse.nearest_peer(K),
             # the weight on seats of other networks: the reuse Eq. 9's gate decided (seats that share a
             # network always weigh each other, at KL 0)
-            "across_share": round(reuse.peer_share(M, self.owner), 6),
+            "across_share": reuse.peer_share(M, self.owner),
         }
         if cfg.reuse_adapt is not None:  # only then: a default run's rows keep their columns
-            metrics["agreement"] = np.round(C, 6)
+            metrics["agreement"] = C
         # the live diagnostics (history only: the results rows keep their columns)
-        peer = (1 - np.diag(M)).round(6).tolist()
-        return metrics, {"trpo_kls": trpo_kls, "learners": learners, "explained_variance": explained,
-                         "peer_shares": peer}
+        detail = {"trpo_kls": trpo_kls, "learners": learners, "explained_variance": explained,
+                  "peer_shares": (1 - np.diag(M)).tolist()}
+        return Update(metrics, detail, {"pairwise_kl": (kl, active)} if "pairwise_kl" in wanted else {})
 
     def optimisers(self) -> list[tuple[torch.optim.Optimizer, float]]:
         """Every optimiser with its learning rate before annealing."""

@@ -13,7 +13,22 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+DECIMALS = 6  # the reuse values' precision in the rows and the history (their digits beyond mean nothing)
 ROUNDING = 1e-5  # matrices are stored to 6 decimals, so a row of M sums to 1 within n * 5e-7
+# the values a learner reports that the rows and the history keep to DECIMALS
+ROUNDED = frozenset({"kl_matrix", "reuse_matrix", "peer_share", "kl_nearest", "across_share", "agreement",
+                     "peer_shares"})
+
+
+def stored(values: dict) -> dict:
+    """A learner's report (``learner.Update``'s metrics or detail) as the rows and the history
+    keep it: the ``ROUNDED`` values to ``DECIMALS``, a number as a number, a list as a list."""
+    out = dict(values)
+    for key in ROUNDED & out.keys():
+        v = out[key]
+        out[key] = (round(v, DECIMALS) if isinstance(v, float) else
+                    np.round(v, DECIMALS).tolist() if isinstance(v, list) else np.round(v, DECIMALS))
+    return out
 
 
 @dataclass(frozen=True)

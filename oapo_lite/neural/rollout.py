@@ -130,6 +130,9 @@ class Rollout:
     # (n, B) bool: the seat acted on the sample; None when every seat always did (the mazes),
     # so the losses take the plain means there
     active: torch.Tensor | None = None
+    # (N, n, obs_dim): the observations after the rollout, where SEAC's returns bootstrap and
+    # SePS's recorded transitions end
+    next_obs: torch.Tensor | None = None
     episode_returns: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)  # spent in the policy forwards and in env stepping
 
@@ -180,7 +183,8 @@ def collect(env: VecEnv, step, actors: Actors, owner: list[int], length: int, ge
     batch = Rollout(Inputs.of(_per_seat(obs), _per_seat(avail)),
                     *(torch.from_numpy(_per_seat(x)) for x in (act, logp)),
                     *(torch.from_numpy(x) for x in (state, final_state, reward, term, trunc)),
-                    None if active.all() else torch.from_numpy(_per_seat(active)), returns, seconds)
+                    active=None if active.all() else torch.from_numpy(_per_seat(active)),
+                    next_obs=torch.from_numpy(step.obs.copy()), episode_returns=returns, seconds=seconds)
     return batch, step
 
 

@@ -11,13 +11,12 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import torch
 
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.a2c_family import A2CFamilyLearner
-from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.config import TrainConfig, derive_seed
 from oapo_lite.neural.learner import Learner
 from oapo_lite.neural.nets import Actors, owners
 from oapo_lite.neural.normalize import Moments, Normalized
@@ -26,10 +25,10 @@ from oapo_lite.neural.rollout import make_env
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
-# a SePS checkpoint written during pre-training before issue 35 moved the modules into layer
-# folders pickled its buffer by the old path (the only object of a moved module a checkpoint holds)
+# a SePS checkpoint written during pre-training before the modules moved into the layer folders
+# pickled its buffer by the old path (the only object of a moved module a checkpoint holds)
 MOVED = {"oapo_lite.seps": "oapo_lite.neural.seps"}
-# the keys under which a checkpoint before issue 35 kept its learner's state: the PPO family's at the top
+# the keys under which a checkpoint before the layer folders kept its learner's state: the PPO family's at the top
 PPO_KEYS_BEFORE = ("critic", "value_norm", "critic_opt", "np_rng")
 
 
@@ -39,11 +38,6 @@ class _Unpickler(pickle.Unpickler):
 
 
 _PICKLE = types.SimpleNamespace(Unpickler=_Unpickler, load=pickle.load, __name__="pickle")
-
-
-def derive_seed(*keys: int) -> int:
-    """A seed for one purpose of a run (evaluation episodes, action sampling, ...), from its seed."""
-    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0])
 
 
 def git_revision() -> str:
@@ -91,9 +85,9 @@ class RunState:
                                                                                       train=False)
         torch.manual_seed(cfg.seed)
         init_gen = torch.Generator().manual_seed(cfg.seed)
-        actors = Actors(max(owners(cfg.network_kind, env.agent_types)) + 1, env.obs_dim, env.n_actions, cfg.hidden,
-                        env.continuous, init_gen, cfg.feature_norm)
-        learner = (A2CFamilyLearner if ALGOS[cfg.algo].a2c else PPOFamilyLearner)(cfg, env, actors, init_gen)
+        owner = owners(cfg.networks_used, env.agent_types)
+        actors = Actors(max(owner) + 1, env.obs_dim, env.n_actions, cfg.hidden, env.continuous, init_gen, cfg.feature_norm)
+        learner = (A2CFamilyLearner if ALGOS[cfg.algo].a2c else PPOFamilyLearner)(cfg, env, actors, init_gen, owner)
         act_gen = torch.Generator().manual_seed(derive_seed(cfg.seed, 1))
         return cls(cfg, env, eval_env, actors, learner, act_gen, env.reset())
 
@@ -174,7 +168,7 @@ CHECKPOINT_KEYS = ("config", "iteration", "actors", "act_gen", "torch_rng", "env
 
 def _inconsistent(ck: dict) -> str | None:
     """What is missing from a checkpoint or contradicts itself, or None: every entry a run needs,
-    of its kind; its iteration, one history entry per iteration, and its evaluation rows (the
+    of its type; its iteration, one history entry per iteration, and its evaluation rows (the
     first before training, in order, none past the iteration)."""
     missing = [k for k in CHECKPOINT_KEYS if k not in ck] + ([] if "learner" in ck or "critic" in ck or "a2c" in ck
                                                             else ["learner"])
@@ -205,7 +199,7 @@ def _inconsistent(ck: dict) -> str | None:
 
 
 def learner_state_before(ck: dict) -> dict:
-    """The learner's state of a checkpoint written before issue 35 gave it the one key "learner":
+    """The learner's state of a checkpoint written before the learner had the one key "learner":
     the A2C family's was under "a2c", the PPO family's keys were at the top level."""
     if "a2c" in ck:
         return ck["a2c"]

@@ -24,17 +24,19 @@ import pandas as pd
 import torch
 
 from oapo_lite.neural.board import Board
-from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.config import TrainConfig, derive_seed
 from oapo_lite.neural.cost import Meter, clocks, machine
+from oapo_lite.neural.learner import WANTS, Observer
 from oapo_lite.neural.losses import Diverged
+from oapo_lite.neural.results import stored
 from oapo_lite.neural.rollout import collect, episode_scores
-from oapo_lite.neural.runstate import RunState, derive_seed, git_revision, load_checkpoint, save_results
+from oapo_lite.neural.runstate import RunState, git_revision, load_checkpoint, save_results
 from oapo_lite.store import Lock
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: bool = True,
           callback: Callable[[dict], None] | None = None, timing: dict | None = None,
-          tensorboard: str | Path | None = None) -> pd.DataFrame:
+          tensorboard: str | Path | None = None, observer: Observer | None = None) -> pd.DataFrame:
     """Train ``cfg`` and return one row per evaluation point (also in ``out_dir/results.csv``).
 
     ``results.csv`` is written with every checkpoint. With ``resume``, continue from
@@ -45,7 +47,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
     metrics are in the checkpoint: ``runstate.load_history(out_dir)``, with each learner's
     diagnostics (approximate KL, clip fraction, entropy), the critic's explained variance and
     every seat's peer share; ``tensorboard`` (a folder) also writes them as TensorBoard
-    scalars while the run trains (``board.py``).
+    scalars while the run trains (``board.py``). ``observer`` (``learner.Observer``) receives
+    every iteration's ``learner.Update`` with what its ``wants`` asked the learner for.
     """
     if not isinstance(cfg, TrainConfig):
         raise TypeError(f"train's cfg must be a TrainConfig, got {type(cfg).__name__} {cfg!r}; "
@@ -55,6 +58,9 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
                         f"{type(out_dir).__name__} {out_dir!r}")
     if tensorboard is not None and (not isinstance(tensorboard, (str, os.PathLike)) or not str(tensorboard).strip()):
         raise TypeError(f"train's tensorboard must be None or a folder path, got {tensorboard!r}")
+    if observer is not None and not (callable(observer) and set(getattr(observer, "wants", ())) <= WANTS.keys()):
+        raise TypeError(f"train's observer must be callable with a wants set within {sorted(WANTS)}, got "
+                        f"{observer!r}")
     for name, value in (("resume", resume), ("progress", progress)):
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"train's {name} must be True or False, got {value!r}")
@@ -77,16 +83,18 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
             print(f"waiting for another process that is training {out}", file=sys.stderr, flush=True)
             lock.acquire()
             start = clocks()  # the wait is not the run's cost
-        return _train(state, out, resume, progress, callback, {} if timing is None else timing, tensorboard, start)
+        return _train(state, out, resume, progress, callback, {} if timing is None else timing, tensorboard, start,
+                      observer)
     finally:
         torch.set_num_threads(threads)
         if lock is not None:
             lock.release()
 
 
-def iterate(state: RunState, clock: dict) -> dict:
-    """One iteration: a rollout from where the last one ended, then the learner's update. Appends
-    to ``state.history`` and returns the metrics that go into the next evaluation row."""
+def iterate(state: RunState, clock: dict, observer: Observer | None = None) -> dict:
+    """One iteration: a rollout from where the last one ended, then the learner's update, asked
+    for K where the iteration is evaluated and for what ``observer`` wants. Appends to
+    ``state.history`` and returns the metrics that go into the next evaluation row."""
     cfg, it = state.cfg, state.iteration
     batch, state.step = collect(state.env, state.step, state.actors, state.owner, cfg.rollout_steps, state.act_gen)
     for part, seconds in batch.seconds.items():
@@ -96,8 +104,14 @@ def iterate(state: RunState, clock: dict) -> dict:
         for opt, lr in state.learner.optimisers():
             for group in opt.param_groups:
                 group["lr"] = lr * cfg.lr_scale(it)
-    metrics, detail = state.learner.learn(batch, state.step, it)
+    wanted = frozenset({"kl"} if cfg.evaluates(it + 1) else ())  # the results rows' kl_matrix
+    if observer is not None:
+        wanted |= observer.wants
+    update = state.learner.learn(batch, it, wanted)
     clock["learn"] += time.perf_counter() - tic
+    if observer is not None:
+        observer(it + 1, update)
+    metrics, detail = stored(update.metrics), stored(update.detail)
     state.iteration = it + 1
     state.history.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, **metrics, **detail,
                           **({"lr_scale": cfg.lr_scale(it)} if cfg.lr_anneal else {})})
@@ -127,7 +141,7 @@ def iterations_reusing(history: list[dict]) -> float:
 
 
 def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, clock: dict,
-           tensorboard: str | Path | None, start: tuple[float, float]) -> pd.DataFrame:
+           tensorboard: str | Path | None, start: tuple[float, float], observer: Observer | None) -> pd.DataFrame:
     from tqdm import tqdm  # tqdm.auto warns in notebooks without ipywidgets, even when disabled
 
     cfg, revision = state.cfg, git_revision()
@@ -157,7 +171,7 @@ def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, c
         for _ in bar:
             tic = time.perf_counter()
             try:
-                metrics = iterate(state, clock)
+                metrics = iterate(state, clock, observer)
             except Diverged as err:
                 raise _diverged_at(err, state, out) from None
             # env steps per wall second of this iteration (SB3's time/fps, CleanRL's SPS)

@@ -33,7 +33,7 @@ def cost_key(cfg: TrainConfig) -> tuple:
     map, whatever its cells."""
     engine = env_registry.split(cfg.env)[0] if cfg.env_fn is None else "env_fn"
     env = cfg.env if engine else ("a map text" if "\n" in cfg.env else cfg.env)
-    values = dict(env=env, networks=cfg.network_kind, rollout_steps=cfg.rollout_steps, hidden="-".join(map(str, cfg.hidden)))
+    values = dict(env=env, networks=cfg.networks_used, rollout_steps=cfg.rollout_steps, hidden="-".join(map(str, cfg.hidden)))
     return tuple(str(values[k] if k in values else getattr(cfg, k)) for k in KEY)
 
 
@@ -89,13 +89,13 @@ def plan(budget: str, figures=FIGURES, workers: int = 2,
     for run in runs:
         try:
             finished.append((run.cfg, experiments.read_run(run.cfg, budget)))
-            on_disk[experiments.run_id(run.cfg)] = not from_nothing
+            on_disk[run.cfg.run_id()] = not from_nothing
         except (FileNotFoundError, experiments.DamagedFile):
-            on_disk[experiments.run_id(run.cfg)] = False
+            on_disk[run.cfg.run_id()] = False
     prices |= recorded(finished)  # a run record beats the table
 
     def line(name: str, these: list) -> Line:
-        todo = [r for r in these if not on_disk[experiments.run_id(r.cfg)]]
+        todo = [r for r in these if not on_disk[r.cfg.run_id()]]
         priced = [r for r in todo if cost_key(r.cfg) in prices]
         sources = sorted({prices[cost_key(r.cfg)].source for r in priced})
         return Line(name, len(these), sum(r.cfg.steps for r in these), len(these) - len(todo), len(todo),
@@ -105,7 +105,7 @@ def plan(budget: str, figures=FIGURES, workers: int = 2,
 
     lines = [line(f, runs_of(f, budget)) for f in figures]  # a run of two figures is in both
     total = line("total", runs)
-    todo = [r for r in runs if not on_disk[experiments.run_id(r.cfg)] and cost_key(r.cfg) in prices]
+    todo = [r for r in runs if not on_disk[r.cfg.run_id()] and cost_key(r.cfg) in prices]
     return lines, total, wall_hours(todo, prices, workers)
 
 

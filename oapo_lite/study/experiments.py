@@ -11,8 +11,6 @@ row belongs to. What the runs are is the grid's (``figures.GRID``).
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import os
 import sys
 from dataclasses import dataclass, field
@@ -56,26 +54,8 @@ def runs_dir(budget: str) -> Path:
     return data_dir(COMMITTED[0] if budget in SHARED_RUNS else budget)
 
 
-def _changed(cfg: TrainConfig) -> dict:
-    """The config fields that differ from ``TrainConfig``'s defaults."""
-    defaults = TrainConfig().flat()
-    return {k: v for k, v in cfg.flat().items() if str(v) != str(defaults[k])}
-
-
-def run_id(cfg: TrainConfig, env_name: str | None = None) -> str:
-    """Name of a run's cached result (and of a command-line run's folder): the algorithm, env
-    (``env_name`` if given: a map file's name) and seed, and a hash of the fields that differ
-    from ``TrainConfig``'s defaults. Hashing only those keeps every cached run valid when a new
-    field is added with a default that reproduces the old behaviour; changing an existing
-    default, on the other hand, must come with a new cache (delete ``runs/``)."""
-    blob = json.dumps(_changed(cfg), sort_keys=True, default=str)
-    env = env_name or ("map" if "\n" in cfg.env else cfg.env)
-    env = env.replace(":", "_")  # an engine's env spec ("smax:3m") as a portable file name
-    return f"{cfg.algo}-{env}-s{cfg.seed}-{hashlib.sha1(blob.encode()).hexdigest()[:10]}"
-
-
 def run_path(cfg: TrainConfig, budget: str) -> Path:
-    return runs_dir(budget) / "runs" / f"{run_id(cfg)}.csv"
+    return runs_dir(budget) / "runs" / f"{cfg.run_id()}.csv"
 
 
 def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
@@ -188,7 +168,7 @@ def _optimum(env: str) -> float:
 def _config_differs(df: pd.DataFrame, cfg: TrainConfig) -> str | None:
     """The first config field whose column in a run file disagrees with ``cfg``, or None. A
     column the file lacks is a field added since it was written: its default is what ran."""
-    changed = _changed(cfg)
+    changed = cfg.changed()
     for name, value in cfg.flat().items():
         if name not in df:
             if name in changed:
@@ -227,8 +207,8 @@ def grid_runs(budget: str, figures=FIGURES) -> list[Run]:
     runs, seen = [], set()
     for fig in figures:
         for run in runs_of(fig, budget):
-            if run_id(run.cfg) not in seen:
-                seen.add(run_id(run.cfg))
+            if run.cfg.run_id() not in seen:
+                seen.add(run.cfg.run_id())
                 runs.append(run)
     return runs
 
@@ -239,8 +219,8 @@ class Failure:
     error: str  # the traceback
 
     def report(self) -> str:
-        return (f"run {run_id(self.run.cfg)} of {self.run.figure} (curve {self.run.label!r}) failed\n"
-                f"  config (non-default fields): {_changed(self.run.cfg)}\n{self.error.rstrip()}")
+        return (f"run {self.run.cfg.run_id()} of {self.run.figure} (curve {self.run.label!r}) failed\n"
+                f"  config (non-default fields): {self.run.cfg.changed()}\n{self.error.rstrip()}")
 
 
 def _missing_engine(cfg: TrainConfig) -> tuple[str, str] | None:
@@ -294,7 +274,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     checkpoints = runs_dir(budget) / "checkpoints"
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
-    jobs = [(run, str(checkpoints / run_id(run.cfg))) for run in missing]
+    jobs = [(run, str(checkpoints / run.cfg.run_id())) for run in missing]
     failed = []
     with tqdm(total=len(missing), desc=f"runs ({budget}, {executor})", disable=progress is not True) as bar:
         for k, (run, rows, error) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
@@ -306,11 +286,11 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
             else:
                 failed.append(Failure(run, error))
                 tqdm.write(failed[-1].report(), file=sys.stderr)
-            bar.set_postfix_str(run_id(run.cfg))
+            bar.set_postfix_str(run.cfg.run_id())
             bar.update()
             if progress == "lines":
                 print(f"runs ({budget}, {executor}): {k}/{len(missing)} {'done' if error is None else 'FAILED'} "
-                      f"{run_id(run.cfg)}", flush=True)
+                      f"{run.cfg.run_id()}", flush=True)
     for figure in figures:
         export_figure(figure, budget)
     return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
@@ -349,19 +329,6 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
                            "(reported above)")
 
 
-def seat_networks(figure: str, budget: str) -> dict[tuple[str, object], list[int]]:
-    """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``), from
-    each env's seat kinds (``registry.agent_types``)."""
-    from oapo_lite.neural.nets import owners
-
-    kinds, out = {}, {}
-    for label, cfg in figure_runs(figure, budget):
-        if cfg.env not in kinds:
-            kinds[cfg.env] = env_registry.agent_types(cfg.env, cfg.max_steps)
-        out[cfg.env, label] = owners(cfg.network_kind, kinds[cfg.env])
-    return out
-
-
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
     with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""
@@ -372,14 +339,14 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
             continue
         except FileNotFoundError:
             if not skip_missing:
-                raise FileNotFoundError(f"run {run_id(cfg)} of {figure} (curve {label!r}) is not on disk; train it "
+                raise FileNotFoundError(f"run {cfg.run_id()} of {figure} (curve {label!r}) is not on disk; train it "
                                         f"with `python -m oapo_lite reproduce --budget {budget} --figures {figure}` "
                                         "or experiments.train_runs") from None
         except DamagedFile as err:
             if not skip_missing:
                 raise
             print(f"warning: {err}", file=sys.stderr)
-        missing.append(run_id(cfg))
+        missing.append(cfg.run_id())
     return (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()), missing
 
 

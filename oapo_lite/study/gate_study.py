@@ -1,4 +1,4 @@
-"""The gate-statistic study (issue 31): which statistic of the per-observation KL should Eq. 9's
+"""The gate-statistic study: which statistic of the per-observation KL should Eq. 9's
 gate compare with sigma?
 
 HAPPO (no reuse, so its policies drift apart as they would without the gate's pull) is trained
@@ -13,8 +13,8 @@ statistic and sigma:
   iterations an OAPPO run would reuse in, had its nets followed HAPPO's path);
 - ``last open``: the last env step at which that happened;
 - ``pairs``: the share of (iteration, learner, peer) within sigma;
-- ``auc`` (maps with two kinds of seat): the probability that a same-kind pair is nearer than a
-  cross-kind pair of the same iteration, over every iteration (0.5: the distance does not tell
+- ``auc`` (maps with two types of seat): the probability that a same-type pair is nearer than a
+  cross-type pair of the same iteration, over every iteration (0.5: the distance does not tell
   role partners apart).
 
 The rule that chooses the engine statistic (``choose``) was fixed before any run, and reads K
@@ -35,17 +35,18 @@ import pandas as pd
 
 from oapo_lite import reuse
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.neural.ppo_family import PPOFamilyLearner, pairwise_distances
+from oapo_lite.neural.learner import Update
 from oapo_lite.neural.rollout import make_env
 from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
 from oapo_lite.store import atomic_write, write_frame
 from oapo_lite.study import experiments, figures
+from oapo_lite.study.verdicts import REUSE_PART
 
 DATA = experiments.data_dir("cpu") / "gate_statistic"
 ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", figures.mujoco.HALFCHEETAH)
 SIGMA = TrainConfig.sigma  # the paper's, where the rule is read
-MIN_OPEN, MAX_PAIRS = 0.25, 0.9
+MIN_OPEN, MAX_PAIRS = REUSE_PART, 0.9  # a gate operates as the verdicts read it; it still gates
 
 
 def happo_config(env: str, seed: int) -> TrainConfig:
@@ -60,23 +61,18 @@ def happo_config(env: str, seed: int) -> TrainConfig:
 def measure(cfg: TrainConfig) -> pd.DataFrame:
     """Train ``cfg`` and return K under every statistic at every iteration, one row per
     (iteration, learner, peer)."""
-    rows, learn, types = [], PPOFamilyLearner.learn, make_env(cfg, 1, seed=0).agent_types
+    rows, types = [], make_env(cfg, 1, seed=0).agent_types
 
-    def recording(self, batch, step, it):
-        kl = pairwise_distances(self.actors, batch.inputs, self.owner)
-        active = None if batch.active is None else batch.active.numpy()
+    def record(iteration: int, update: Update) -> None:
+        kl, active = update.observed["pairwise_kl"]
         K = {s: reuse.reduce_kl(kl, s, active) for s in reuse.KL_REDUCES}
         for i, j in zip(*np.nonzero(~np.eye(len(kl), dtype=bool))):
-            rows.append({"iteration": it + 1, "step": (it + 1) * cfg.iteration_steps, "learner": i, "peer": j,
+            rows.append({"iteration": iteration, "step": iteration * cfg.iteration_steps, "learner": i, "peer": j,
                          "same_kind": types[i] == types[j], **{s: K[s][i, j] for s in K}})
-        return learn(self, batch, step, it)
 
-    PPOFamilyLearner.learn = recording
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            train(cfg, tmp, resume=False, progress=False)
-    finally:
-        PPOFamilyLearner.learn = learn
+    record.wants = frozenset({"pairwise_kl"})
+    with tempfile.TemporaryDirectory() as tmp:
+        train(cfg, tmp, resume=False, progress=False, observer=record)
     return pd.DataFrame(rows).assign(env=cfg.env, seed=cfg.seed)
 
 
@@ -99,7 +95,7 @@ def summary(df: pd.DataFrame, sigmas=figures.mazes.SIGMAS) -> pd.DataFrame:
 
 
 def kind_auc(run: pd.DataFrame, stat: str) -> float:
-    """P(a same-kind pair's K < a cross-kind pair's K of the same iteration), ties counted half."""
+    """P(a same-type pair's K < a cross-type pair's K of the same iteration), ties counted half."""
     wins = total = 0.0
     for _, it in run.groupby("iteration"):
         same, cross = it.loc[it["same_kind"], stat].to_numpy(), it.loc[~it["same_kind"], stat].to_numpy()
@@ -132,7 +128,7 @@ def run(envs=ENVS, seeds=(0, 1, 2)) -> None:
     for env in envs:
         for seed in seeds:
             cfg = happo_config(env, seed)
-            path = DATA / f"{experiments.run_id(cfg)}.csv"
+            path = DATA / f"{cfg.run_id()}.csv"
             if not path.exists():
                 print(f"training {env} seed {seed} ...", flush=True)
                 record = json.dumps({"config": cfg.flat(), "git_rev": git_revision()}, default=str, indent=1)

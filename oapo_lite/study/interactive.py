@@ -14,7 +14,7 @@ list (or 1-d array) of values, a slider that steps through those values in the o
 starting at the first (``interact`` would make a drop-down of a list).
 
 Executing a widget cell in a batch run (papermill, nbclient) stores the widgets' state in the
-notebook and can hang intermittently (jupyter/nbclient issue 312), so the notebooks tag a
+notebook and can hang intermittently (github.com/jupyter/nbclient/issues/312), so the notebooks tag a
 slider cell ``skip-execution`` (and ``nbval-skip``, ``remove-cell``): it runs only in JupyterLab.
 """
 from __future__ import annotations

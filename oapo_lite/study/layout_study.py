@@ -1,4 +1,4 @@
-"""The layout study (issue 12): which runs, on which generated layouts, at a budget, and the
+"""The layout study: which runs, on which generated layouts, at a budget, and the
 tables its figure and notebook 16 read from them.
 
 For every layout of ``envs.layouts.LAYOUTS``: OAPPO (sigma 0.1, lambda 0.7) against HAPPO for
@@ -46,7 +46,7 @@ def load(budget: str, layouts=None) -> pd.DataFrame:
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         if not experiments.run_path(cfg, budget).exists():
-            raise FileNotFoundError(f"run {experiments.run_id(cfg)} of layout {name} is not on disk: "
+            raise FileNotFoundError(f"run {cfg.run_id()} of layout {name} is not on disk: "
                                     f"{experiments.run_path(cfg, budget)}")
         frames.append(experiments.read_run(cfg, budget).assign(layout=name, label=label))
     return pd.concat(frames, ignore_index=True)

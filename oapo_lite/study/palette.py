@@ -18,8 +18,8 @@ PALETTE = {
     "oappo one seat": "#98df8a", "oappo type": "#1b7f79",
     "oappo agent max": "#005a32", "oappo agent mean": "#41ab5d", "oappo agent q90": "#a1d99b",
     "oappo type max": "#08519c", "oappo type mean": "#6baed6", "oappo type q90": "#9ecae1",
-    # the selection ablation: gated reuse, always-on reuse, and per kind within its kind only
-    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own kind": "#7fb8b3",
+    # the selection ablation: gated reuse, always-on reuse, and per type within its type only
+    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own type": "#7fb8b3",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
     "oappo entropy x W[i,i]": "#5254a3",
@@ -33,8 +33,8 @@ PALETTE = {
     "happo 20 x 200": "#a55194", "happo HARL": "#393b79", "happo normalized": "#de9ed6", "ppo one agent": "#969696",
     "sb3 ppo (one agent)": "#525252",
 }
-# what is not a curve: the mazes' agents (named after their colours) and Fig. 1's reused and omitted peers
-AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
+# what is not a curve: Fig. 1's reused and omitted peers (and the mazes' agents, whose colours
+# are ``envs.render.AGENT_COLOURS``)
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
 # other names of a curve in the table (the same runs drawn in another figure)
 ALIASES = {"oappo lambda=0.4": "lambda = 0.4", "oappo lambda=1": "lambda = 1", "oappo lambda=0.2": "lambda = 0.2",

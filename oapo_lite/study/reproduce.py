@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  experiment runs ({args.executor}): {runs.done} trained, {runs.cached} already on disk, "
           f"{len(runs.failed)} failed")
     for failure in runs.failed:
-        print(f"  FAILED {experiments.run_id(failure.run.cfg)} ({failure.run.figure}, curve {failure.run.label!r})")
+        print(f"  FAILED {failure.run.cfg.run_id()} ({failure.run.figure}, curve {failure.run.label!r})")
     if runs.failed:
         print("  notebooks not run: they need every run (failures reported above with config and traceback)")
     for name, seconds in timings:

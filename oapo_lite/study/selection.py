@@ -1,6 +1,6 @@
 """Eq. 9's selection tested on the engines: gated reuse against no reuse (HAPPO) and against
-always-on reuse (sigma = inf), seed-paired, and, where seats share a network per kind, reuse
-across kinds against none (lambda = 1). The runs are ``grid``'s ``fig_selection_*`` figures.
+always-on reuse (sigma = inf), seed-paired, and, where seats share a network per type, reuse
+across types against none (lambda = 1). The runs are ``grid``'s ``fig_selection_*`` figures.
 
 The gate's sigma was fixed per env and reading before any gated run, by a rule that reads K
 alone, never a return (``gate_sigma``): the median of the across-network K[i, j] at the
@@ -42,7 +42,7 @@ def gate_sigma(env: str, reading: str) -> float:
     values = []
     for run in figures.runs_of(figure, "cpu"):
         if run.label == label and run.cfg.env == env and run.cfg.seed in seeds:
-            owner = owners(run.cfg.network_kind, env_registry.agent_types(env, run.cfg.max_steps))
+            owner = owners(run.cfg.networks_used, env_registry.agent_types(env, run.cfg.max_steps))
             for kl in experiments.read_run(run.cfg, "cpu")["kl_matrix"].dropna():
                 values.extend(across_pairs(kl, owner))
     return float(f"{np.median(values):.2g}")

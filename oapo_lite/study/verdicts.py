@@ -26,7 +26,6 @@ from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
 from oapo_lite.reuse import peer_share
-from oapo_lite.store import read_arrays
 from oapo_lite.study.statistics import Interval, bootstrap_interval, iqm, probability_of_improvement
 
 THRESHOLD = 0.95
@@ -52,9 +51,9 @@ STATUSES = {
     NOT_RUN: "the env has no run on disk at this budget (not trained yet, or only at `paper`, a cluster's job)",
 }
 # a curve reusing by Eq. 9 tests reuse when some peer weight was given at this share of its
-# evaluated iterations while it learned (issue 31's share for "the gate operates")
+# evaluated iterations while it learned: the gate operates (the gate-statistic study's rule too)
 REUSE_PART = 0.25
-EQ9_ALGOS = tuple(a for a, spec in ALGOS.items() if spec.reuse == "oapo")
+EQ9_ALGOS = tuple(a for a, spec in ALGOS.items() if spec.reuse_rule == "oapo")
 INITIAL = 0.1  # a run's initial level: its first tenth of evaluation points (the untrained policy at step 0)
 LEARN_SE = 2.0  # a curve learned when its gain exceeds this many standard errors over seeds
 # per-run numbers a verdict reads; "steps" and "drawdown" are better when lower
@@ -89,7 +88,7 @@ def _share(tail: float) -> str:
 
 FRAC_OPT = Metric("frac_opt", THRESHOLD, -np.inf, "{:.0%} of the optimum", "final fraction of the optimum")
 WIN_RATE = Metric("eval_success", 0.5, 0.05, "a {:.0%} win rate", "final win rate")
-# a return is noisier than a win rate over 64 battles: its final value is the last fifth (issue 32)
+# a return is noisier than a win rate over 64 battles: its final value is the last fifth
 RETURN = Metric("eval_return", np.inf, -np.inf, "return {:g}", "final evaluation return", tail=0.2)
 # GRF's score: the share of evaluation episodes with a goal; "nearly perfect" is 90%
 SCORE = Metric("eval_success", 0.9, 0.05, "a {:.0%} score", "final score (share of episodes with a goal)")
@@ -126,7 +125,7 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
         hit = run.loc[run[y] >= threshold, "step"]
         k, k0 = max(FINAL_MIN, int(round(tail * len(run)))), max(1, int(round(INITIAL * len(run))))
         held = run[y].dropna()  # the windows hold k and k0 evaluations with a value
-        steps, shares = _peer_shares(run, _owner(run))
+        steps, shares = peer_shares(run, _owner(run))
         learning = steps <= (hit.iloc[0] if len(hit) else np.inf)
         rows.append({
             "label": label,
@@ -148,7 +147,7 @@ PER_RUN_COLUMNS = ["label", "seed", "steps_to_threshold", "reached", "initial", 
                    "last_reuse_step", "gaps"]
 
 
-def _peer_shares(run: pd.DataFrame, owner=None) -> tuple[np.ndarray, np.ndarray]:
+def peer_shares(run: pd.DataFrame, owner=None) -> tuple[np.ndarray, np.ndarray]:
     """(step, ``peer_share`` of M) at a run's evaluated iterations that recorded M (none for
     SEAC, SePS, or data without the column); with ``owner`` (each seat's network), the share on
     other networks' seats alone."""
@@ -160,15 +159,15 @@ def _peer_shares(run: pd.DataFrame, owner=None) -> tuple[np.ndarray, np.ndarray]
 
 def _owner(run: pd.DataFrame) -> list[int] | None:
     """The network of each seat of a run, from its config columns (``nets.owners`` of its
-    networks reading and its env's seat kinds); None where the rows do not say (every seat
+    networks reading and its env's agent types); None where the rows do not say (every seat
     then counts as its own network)."""
     if not {"env", "algo"} <= set(run.columns) or run["algo"].iloc[0] not in ALGOS:
         return None
     first = run.iloc[0]
     networks = first.get("networks")
-    kind = networks if isinstance(networks, str) else ("one" if ALGOS[first["algo"]].shared else "agent")
-    kinds = _agent_types(str(first["env"]), int(first["max_steps"]) if "max_steps" in run else 50)
-    return None if kinds is None else owners(kind, kinds)
+    types = _agent_types(str(first["env"]), int(first["max_steps"]) if "max_steps" in run else 50)
+    return None if types is None else owners(networks if isinstance(networks, str) else ALGOS[first["algo"]].networks,
+                                             types)
 
 
 @functools.cache
@@ -177,87 +176,6 @@ def _agent_types(env: str, max_steps: int) -> tuple | None:
         return tuple(env_registry.agent_types(env, max_steps))
     except (ValueError, ImportError):  # a map text flattened into one line, an engine not installed here
         return None
-
-
-def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per run, from the reuse matrix M of its evaluated iterations: how many there are,
-    the share of them in which some learner gave another agent's experience a positive weight
-    (``reusing``), the mean peer share (M's off-diagonal mass per learner) over them, and the
-    last step at which one did (NaN: never). ``all_iterations``: the share over every iteration,
-    where the run recorded it (``iterations_reusing``, at its last evaluation), else NaN. Runs
-    without a reuse matrix (SEAC, SePS) have no row."""
-    columns = ["label", "seed", "evaluations", "reusing", "mean_peer_share", "last_reuse_step", "all_iterations"]
-    rows = []
-    groups = df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False) if len(df) else []
-    for (label, seed), run in groups:
-        steps, share = _peer_shares(run)
-        if not len(steps):  # SEAC, SePS: no reuse matrix
-            continue
-        reusing = steps[share > 0]
-        every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run else np.nan
-        rows.append({"label": label, "seed": seed, "evaluations": len(steps), "reusing": float(np.mean(share > 0)),
-                     "mean_peer_share": float(share.mean()),
-                     "last_reuse_step": float(reusing.max()) if len(reusing) else np.nan, "all_iterations": float(every)})
-    return pd.DataFrame(rows, columns=columns)
-
-
-def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
-    """``reuse_per_run`` per label: seeds, evaluated iterations per run, the share of them that
-    reused and the mean peer share (means over seeds), the last step any seed reused, and the
-    share over every iteration where the runs recorded it."""
-    return reuse_per_run(df).groupby("label", sort=False).agg(
-        seeds=("seed", "size"), evaluations=("evaluations", "first"), reusing=("reusing", "mean"),
-        mean_peer_share=("mean_peer_share", "mean"), last_reuse_step=("last_reuse_step", "max"),
-        all_iterations=("all_iterations", "mean"))
-
-
-def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd.DataFrame:
-    """Per env and label (issue 31's table): seeds; the share of every iteration with any peer
-    weight (``all_iterations``, means over the runs that recorded it; seats that share a
-    network always weigh each other); at the evaluated iterations, the mean peer share, and,
-    across networks alone (``peer_share`` with ``owners[(env, label)]``, the network of each
-    seat: the reuse Eq. 9's gate decided), the share of them with any weight
-    (``across_reusing``) and the mean share (``mean_across_nets``); and the final ``y``, a run's
-    mean over the last ``tail`` of its evaluation points, as mean and standard deviation over
-    seeds. Runs without a reuse matrix (SEAC, SePS) have no row."""
-    parts = []
-    if "reuse_matrix" not in df:  # no run recorded M (or no run at all)
-        return pd.DataFrame()
-    lacking = [c for c in ("env", "label", "seed", "step", y) if c not in df]
-    if lacking:
-        raise ValueError(f"the runs lack the columns {lacking} (experiments.load_figure's rows have them)")
-    df = read_arrays(df, ("reuse_matrix",))  # JSON text, as a CSV holds it, or arrays already
-    unknown = sorted({(e, label) for e, label in zip(df["env"], df["label"])} - set(owners))
-    if unknown:
-        raise ValueError(f"owners names no network of each seat for {unknown} (experiments.seat_networks gives them)")
-    for env, part in df[df["reuse_matrix"].notna()].groupby("env", sort=False):
-        final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
-        across = pd.Series([peer_share(m, owners[env, label]) for m, label in zip(part["reuse_matrix"], part["label"])],
-                           index=part.index)
-        per_seed = across.groupby([part["label"], part["seed"]], sort=False)
-        parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
-                     .join(per_seed.apply(lambda x: (x > 0).mean()).groupby(level=0, sort=False).mean()
-                           .rename("across_reusing"))
-                     .join(per_seed.mean().groupby(level=0, sort=False).mean().rename("mean_across_nets"))
-                     .join(final.mean().rename("final")).join(final.std().rename("final_std"))
-                     .assign(env=env).set_index("env", append=True).swaplevel())
-    return pd.concat(parts) if parts else pd.DataFrame()
-
-
-def sweep_table(df: pd.DataFrame, family: dict, metric: Metric, tie: float = 0.02) -> pd.DataFrame:
-    """A tuning sweep, one row per setting (curve label): its ``family[label]``, seeds, final
-    value (mean over seeds of each run's last fifth of evaluations) and env steps to the
-    metric's threshold (IQM over seeds, a run that never gets there counted at its end); and
-    ``chosen`` by the sweep's rule: per family the highest final value, where settings within
-    ``tie`` of it tie and the fewest steps among them wins."""
-    runs = per_run(df, metric.threshold, tail=0.2, y=metric.column)
-    t = runs.groupby("label", sort=False).agg(seeds=("seed", "size"), final=("final", "mean"),
-                                              steps=("steps_to_threshold", lambda s: float(iqm(s.to_numpy()))))
-    t.insert(0, "family", [family[label] for label in t.index])
-    best = t.groupby("family")["final"].transform("max")
-    contenders = t[t["final"] >= best - tie]
-    t["chosen"] = t.index.isin(contenders.sort_values("steps", kind="stable").groupby("family").head(1).index)
-    return t
 
 
 def _summary_of(runs: pd.DataFrame) -> pd.DataFrame:

@@ -15,7 +15,7 @@ of the already-updated learners' own-seat ratios. HAPPO / HATRPO are the identit
 MAPPO is one shared table trained on every seat with M = 1/n and no factor.
 
 Every iteration also records the true improvement J(pi_{k+1}) - J(pi_k) and Lemma 1's
-lower bound in its valid form (see oapo_lite.tabular.exact.lemma1 and tests/test_exact.py).
+lower bound in its valid form (see oapo_lite.tabular.exact.lemma1 and tests/tabular/test_exact.py).
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ import numpy as np
 
 from oapo_lite import reuse
 from oapo_lite.algorithms import ALGOS
+from oapo_lite.renamed import refuse
 from oapo_lite.tabular.exact import DecPOMDP, evaluate, joint_policy, kl_max, lemma1, log_softmax, softmax, state_distribution
 
 # the algorithms of the tabular track: the PPO / TRPO family of the algorithm table (``ALGOS``,
@@ -33,18 +34,19 @@ from oapo_lite.tabular.exact import DecPOMDP, evaluate, joint_policy, kl_max, le
 TABLE_ALGOS = ("oappo", "oatrpo", "happo", "hatrpo", "mappo")
 
 
+@refuse({"epochs": "ppo_epochs", "reuse": "reuse_mode"})
 @dataclass(frozen=True)
 class TabularConfig:
     algo: str = "oappo"
     iterations: int = 30
     lr: float = 5.0  # PPO: gradient-ascent step on the logits (advantages are normalised)
-    epochs: int = 10  # PPO: ascent steps per learner per iteration
+    ppo_epochs: int = 10  # PPO: ascent steps per learner per iteration
     clip: float = 0.2  # PPO: clip epsilon of Eq. 8
     kl_threshold: float = 0.01  # TRPO: delta of Eq. 7
     backtrack: float = 0.5  # TRPO: line-search shrink factor (up to 10 tries)
     sigma: float = 0.1  # Eq. 9: KL gate for reuse
     reuse_lambda: float = 0.7  # Eq. 9's lambda: weight a learner keeps on its own experience
-    reuse: str = "weights"  # "weights": M as weights; "sample": one source per learner (Alg. 1 line 5)
+    reuse_mode: str = "weights"  # "weights": M as weights; "sample": one source per learner (Alg. 1 line 5)
     estimate: str = "exact"  # "exact" expectations or "samples"
     n_episodes: int = 64  # samples: episodes per iteration
     horizon: int = 400  # samples: episodes are cut here
@@ -52,11 +54,11 @@ class TabularConfig:
     seed: int = 0
 
     def __post_init__(self):
-        for name, value, allowed in (("algo", self.algo, TABLE_ALGOS), ("reuse", self.reuse, ("weights", "sample")),
+        for name, value, allowed in (("algo", self.algo, TABLE_ALGOS), ("reuse_mode", self.reuse_mode, ("weights", "sample")),
                                      ("estimate", self.estimate, ("exact", "samples"))):
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
-        for name in ("iterations", "epochs", "n_episodes", "horizon"):
+        for name in ("iterations", "ppo_epochs", "n_episodes", "horizon"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("lr", "clip", "kl_threshold"):
@@ -191,7 +193,7 @@ def learner_objective(game: DecPOMDP, batch: Batch, old: np.ndarray, row: np.nda
 
 def ppo_update(obj: Objective, logits: np.ndarray, cfg: TabularConfig) -> np.ndarray:
     """Eq. 8: a few exact gradient-ascent steps on sum coef * min(r, clip(r, 1 +- eps))."""
-    for _ in range(cfg.epochs):
+    for _ in range(cfg.ppo_epochs):
         r = obj.ratio(logits)
         clipped = ((obj.coef > 0) & (r > 1 + cfg.clip)) | ((obj.coef < 0) & (r < 1 - cfg.clip))
         logits = logits + cfg.lr * obj.grad(logits, obj.coef * ~clipped)
@@ -239,15 +241,15 @@ def seat_map_distribution(m: np.ndarray) -> dict:
 def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
     """Algorithm 1 on ``game`` with softmax tables; one Record per iteration."""
     n = game.n_agents
-    shared = cfg.algo == "mappo"
+    shared = ALGOS[cfg.algo].networks == "one"
     streams = np.random.SeedSequence(cfg.seed).spawn(4)
     rng_init, rng_order, rng_map, rng_samples = (np.random.default_rng(s) for s in streams)
     logits = rng_init.normal(0.0, cfg.init_scale, (1 if shared else n, game.n_obs, game.n_actions))
-    seat_learner = np.zeros(n, dtype=np.int64) if shared else np.arange(n)
+    owner = np.zeros(n, dtype=np.int64) if shared else np.arange(n)
     update = trpo_update if ALGOS[cfg.algo].trust_region else ppo_update
     records = []
     for k in range(cfg.iterations):
-        old = softmax(logits)[seat_learner]
+        old = softmax(logits)[owner]
         batch = (exact_batch(game, old) if cfg.estimate == "exact"
                  else sample_batch(game, old, cfg.n_episodes, cfg.horizon, rng_samples))
         eta = visited(game, batch)
@@ -255,8 +257,8 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
         std = np.sqrt(batch.weight @ (batch.adv - mean) ** 2 / batch.weight.sum())
         adv = (batch.adv - mean) / (std + 1e-8)
         kl = kl_between_agents(old, eta)
-        m = reuse.matrix_for(ALGOS[cfg.algo].reuse, kl, cfg.sigma, cfg.reuse_lambda)
-        mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse == "sample" else None
+        m = reuse.matrix_for(ALGOS[cfg.algo].reuse_rule, kl, cfg.sigma, cfg.reuse_lambda)
+        mapping = reuse.sample_mapping(m, rng_map) if cfg.reuse_mode == "sample" else None
         rows = np.eye(n)[mapping] if mapping is not None else m
         order = np.zeros(1, dtype=np.int64) if shared else reuse.update_order(n, rng_order)
         factor = np.ones(len(batch.state))
@@ -269,7 +271,7 @@ def run_tabular(game: DecPOMDP, cfg: TabularConfig) -> list[Record]:
             # HAPPO's sequential factor: learner i now plays its own seat with the new table
             own = (game.obs[i][batch.state], game.joint_actions[batch.action, i])
             factor = factor * softmax(new_logits[i])[own] / old[i][own]
-        new = softmax(new_logits)[seat_learner]
+        new = softmax(new_logits)[owner]
         valid = lemma1(game, old, new, {tuple(range(n)): 1.0})
         written = lemma1(game, old, new, seat_map_distribution(m))
         records.append(Record(iteration=k, J=evaluate(game, old).J, improvement=valid["improvement"],

@@ -375,7 +375,7 @@ def off_agent_estimate(game: DecPOMDP, old, seat: int, candidate, factor_policie
 
     with m = ``seat`` and ``factor_policies`` {seat k: table f_k} for the earlier seats.
     ``minus_one=False`` drops the "- 1" (then it equals L^{e_{1:m}}; with it, the local
-    increment L^{e_{1:m}} - L^{e_{1:m-1}}; see tests/test_exact.py).
+    increment L^{e_{1:m}} - L^{e_{1:m-1}}; see tests/tabular/test_exact.py).
     """
     if seat in factor_policies:
         raise ValueError(f"seat {seat} is the one being estimated; factor_policies may hold only earlier seats")

@@ -11,7 +11,7 @@ from oapo_lite.study.grid import ENGINE_BUDGETS, At, Figure
 from oapo_lite.study.verdicts import RETURN, higher, paired_higher
 
 # no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO, a net per agent with the engines'
-# mean gate, and one net seat by seat; per kind is per agent here, every leg being its own kind)
+# mean gate, and one net seat by seat; per type is per agent here, every leg being its own type)
 # and direct reuse (SEAC). The PPO family runs 15 epochs, HARL's setting that helped most in our
 # loop (``fig_mamujoco_settings``).
 FIGA_CURVES = {"happo": dict(algo="happo"), "mappo": dict(algo="mappo"), "oappo": dict(algo="oappo", kl_reduce="mean"),

@@ -9,20 +9,20 @@ from oapo_lite.study.verdicts import paired_higher
 # early-reuse study 0-9)
 SELECTION_SEEDS = tuple(range(10, 20))
 # the readings of OAPPO's networks, as curve labels and names
-READING_NAMES = {"oappo": "OAPPO (a net per agent)", "oappo type": "OAPPO (a net per kind)",
+READING_NAMES = {"oappo": "OAPPO (a net per agent)", "oappo type": "OAPPO (a net per type)",
                  "oappo one seat": "OAPPO (one net, seat by seat)"}
 
 
-def reading_curves(env: str, kinds: tuple[str, ...] = ("agent",)) -> tuple:
-    """OAPPO under each reading of the networks (``kinds``: a net per agent, per kind) and each
+def reading_curves(env: str, networks: tuple[str, ...] = ("agent",)) -> tuple:
+    """OAPPO under each networks reading in ``networks`` (a net per agent, per type) and each
     gate statistic, beside HAPPO, MAPPO and one net updated seat by seat. A reading that cannot
-    change the run on an env is left out there: a net per kind is a net per agent where every
-    seat is its own kind, and MAPPO where all are one kind; one net shared by every seat is at
+    change the run on an env is left out there: a net per type is a net per agent where every
+    seat is its own type, and MAPPO where all are one type; one net shared by every seat is at
     KL 0 from itself, so its gate never shuts and no statistic matters."""
     return (("happo", dict(algo="happo", env=env)), ("mappo", dict(algo="mappo", env=env)),
-            *((f"oappo {kind} {stat}", dict(algo="oappo", env=env, kl_reduce=stat,
-                                            **({} if kind == "agent" else dict(networks=kind))))
-              for kind in kinds for stat in KL_REDUCES),
+            *((f"oappo {nets} {stat}", dict(algo="oappo", env=env, kl_reduce=stat,
+                                            **({} if nets == "agent" else dict(networks=nets))))
+              for nets in networks for stat in KL_REDUCES),
             ("oappo one seat", dict(algo="oappo", env=env, networks="one", update_by="seat")))
 
 
@@ -31,26 +31,26 @@ def sigma_on(table: dict, env: str) -> dict:
     return {reading: s for (e, reading), s in table.items() if e == env}
 
 
-def selection_curves(env: str, sigma: dict, per_agent: dict, per_kind: dict | None = None) -> tuple:
+def selection_curves(env: str, sigma: dict, per_agent: dict, per_type: dict | None = None) -> tuple:
     """The selection ablation's curves on ``env``: no reuse (HAPPO), a net per agent reusing
-    always (sigma = inf) and through the gate, and with ``per_kind`` a net per kind reusing
-    within its kind only (lambda = 1) and across kinds through the gate. ``sigma``: the rule's
+    always (sigma = inf) and through the gate, and with ``per_type`` a net per type reusing
+    within its type only (lambda = 1) and across types through the gate. ``sigma``: the rule's
     sigma per reading ("agent", "type") on this env; a gated curve joins once it is there."""
     gated = dict(per_agent, algo="oappo", kl_reduce="mean", env=env)
     curves = [("happo", dict(per_agent, algo="happo", env=env)), ("oappo always", dict(gated, sigma=float("inf")))]
     if "agent" in sigma:
         curves.append(("oappo gated", dict(gated, sigma=sigma["agent"])))
-    if per_kind is not None:
-        kind = dict(per_kind, env=env)
-        curves += [("oappo type own kind", dict(kind, reuse_lambda=1.0)),
-                   ("oappo type gated", dict(kind, sigma=sigma["type"]))]
+    if per_type is not None:
+        by_type = dict(per_type, env=env)
+        curves += [("oappo type own type", dict(by_type, reuse_lambda=1.0)),
+                   ("oappo type gated", dict(by_type, sigma=sigma["type"]))]
     return tuple(curves)
 
 
 def selection_claims(env: str, sigma: dict, prefix: str = "", name: str | None = None) -> list:
     """The ablation's claims on ``env`` (each led by the env without ``prefix``, for a figure
     whose claims are per env; else named ``name``): does reuse help, does selection, and across
-    kinds."""
+    types."""
     name = name or env.removeprefix(prefix)
     out = [(paired_higher, ("oappo always", "happo"), f"{name}: always-on reuse ends above no reuse")]
     if "agent" in sigma:
@@ -59,7 +59,7 @@ def selection_claims(env: str, sigma: dict, prefix: str = "", name: str | None =
                (paired_higher, ("oappo gated", "oappo always"), f"{name}: gated reuse ends above always-on reuse "
                                                                  "(selection helps)"), *out]
     if "type" in sigma:
-        out.append((paired_higher, ("oappo type gated", "oappo type own kind"),
-                    f"{name}: a net per kind reusing across kinds through the gate (sigma "
-                    f"{sigma['type']:g}) ends above one reusing within its kind only"))
+        out.append((paired_higher, ("oappo type gated", "oappo type own type"),
+                    f"{name}: a net per type reusing across types through the gate (sigma "
+                    f"{sigma['type']:g}) ends above one reusing within its type only"))
     return [(name, *c) if prefix else c for c in out]

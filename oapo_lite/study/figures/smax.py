@@ -25,7 +25,7 @@ SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 
 # One tuning budget for every family on 2s3z (seeds 0-2, 500k steps, Fig. 4's batch and its
 # other SMAX_TUNED settings): learning rate (actor and critic) x entropy bonus for HAPPO (the
-# separate-network family), MAPPO, a net per kind with the engines' mean gate and one net
+# separate-network family), MAPPO, a net per type with the engines' mean gate and one net
 # updated seat by seat; then the PPO clip at each family's best. The rule, fixed before the
 # runs (``tables.sweep_table``): per family, the setting with the highest final win rate;
 # settings within 0.02 of it tie, and the tie goes to the fewest env steps to a 50% win rate.
@@ -54,11 +54,11 @@ def tuned(family: str) -> dict:
 
 
 # Fig. 4: every family at its sweep's choice. OAPPO under each reading that trains differently on
-# the map (a net per kind only where kinds differ: with one kind it is MAPPO): a net per agent
+# the map (a net per type only where types differ: with one type it is MAPPO): a net per agent
 # with the engines' gate statistic (the mean) at the separate-network family's setting, a net per
-# kind, and one net seat by seat. OATRPO gates with the mean too (TRPO has no learning rate or
+# type, and one net seat by seat. OATRPO gates with the mean too (TRPO has no learning rate or
 # entropy bonus to tune).
-# the long maps: MAPPO, HAPPO and the reading the sweep found best whose gate acts (a net per kind)
+# the long maps: MAPPO, HAPPO and the reading the sweep found best whose gate acts (a net per type)
 LONG_SMAX_CURVES = ("mappo", "happo", "oappo type")
 
 
@@ -117,7 +117,7 @@ FIGURES = (
            }, metric=WIN_RATE, claims=tuple(c for m in FIG4_MAPS for c in _smax_claims(m)), claims_per_env="smax:",
            section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # per map, no reuse, a net per agent reusing always and through the gate, and on 2s3z a net
-    # per kind reusing within its kind only and across kinds through the gate
+    # per type reusing within its type only and across types through the gate
     Figure("fig_selection_smax", tuple(c for env in SELECTION_SMAX for c in selection_curves(
         env, sigma_on(SELECTION_SIGMA, env), tuned("happo"),
         tuned("oappo type") if env.removeprefix("smax:") in SMAX_HETEROGENEOUS else None)),

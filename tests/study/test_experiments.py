@@ -13,13 +13,13 @@ import fakes
 
 def test_a_run_id_depends_only_on_fields_that_differ_from_the_defaults():
     bare = TrainConfig(algo="happo", seed=3)
-    assert experiments.run_id(bare) == experiments.run_id(TrainConfig(algo="happo", seed=3, lr=5e-4, n_envs=32))
-    assert experiments.run_id(bare) != experiments.run_id(TrainConfig(algo="happo", seed=3, lr=1e-3))
-    assert experiments.run_id(bare).startswith("happo-black_red-s3-")
+    assert bare.run_id() == TrainConfig(algo="happo", seed=3, lr=5e-4, n_envs=32).run_id()
+    assert bare.run_id() != TrainConfig(algo="happo", seed=3, lr=1e-3).run_id()
+    assert bare.run_id().startswith("happo-black_red-s3-")
 
 
 def test_every_paper_run_has_its_own_id():
-    ids = {experiments.run_id(cfg) for fig in figures.FIGURES
+    ids = {cfg.run_id() for fig in figures.FIGURES
            for _, cfg in figures.figure_runs(fig, "paper")}
     configs = {str(cfg.flat()) for fig in figures.FIGURES for _, cfg in figures.figure_runs(fig, "paper")}
     assert len(ids) == len(configs)
@@ -43,8 +43,8 @@ def test_paper20_is_paper_with_twenty_seeds():
     assert (paper20.steps, paper20.eval_every, paper20.eval_episodes) == (paper.steps, paper.eval_every, paper.eval_episodes)
     # the first five seeds are the very runs of the paper budget (same ids)
     for fig in figures.MAZE_FIGURES:
-        ids = {experiments.run_id(c) for _, c in figures.figure_runs(fig, "paper20")}
-        assert {experiments.run_id(c) for _, c in figures.figure_runs(fig, "paper")} <= ids
+        ids = {c.run_id() for _, c in figures.figure_runs(fig, "paper20")}
+        assert {c.run_id() for _, c in figures.figure_runs(fig, "paper")} <= ids
         # ... and they are trained once: both budgets read the same cache, each writes its own figures
         for _, c in figures.figure_runs(fig, "paper"):
             assert experiments.run_path(c, "paper20") == experiments.run_path(c, "paper")
@@ -55,7 +55,7 @@ def test_the_grid_keeps_every_committed_maze_run_valid():
     """``make reproduce BUDGET=paper`` finds every committed run: the ids did not move."""
     runs = [cfg for fig in ("fig3b", "fig3c", "fig3d", "fig5b", "fig1") for _, cfg in figures.figure_runs(fig, "paper")]
     committed = {p.stem for p in (experiments.ROOT / "figures" / "data" / "runs").glob("*.csv")}
-    assert len(runs) == 86 and {experiments.run_id(cfg) for cfg in runs} <= committed  # 81 and HATRPO's 5
+    assert len(runs) == 86 and {cfg.run_id() for cfg in runs} <= committed  # 81 and HATRPO's 5
 
 
 def test_a_new_figure_is_data_with_its_own_budget_overrides():
@@ -101,8 +101,8 @@ def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recove
     argv = ["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]
     assert reproduce.main(argv) == 1
     out = capsys.readouterr()
-    assert f"FAILED {experiments.run_id(cfg)} (fig1, curve 'oappo')" in out.out and "0 trained" in out.out
-    assert experiments.run_id(cfg) in out.err and "Traceback" in out.err and "'env': 'black_blue_red'" in out.err
+    assert f"FAILED {cfg.run_id()} (fig1, curve 'oappo')" in out.out and "0 trained" in out.out
+    assert cfg.run_id() in out.err and "Traceback" in out.err and "'env': 'black_blue_red'" in out.err
     assert not experiments.run_path(cfg, "smoke").exists()
     monkeypatch.undo()
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
@@ -135,15 +135,15 @@ def test_the_engine_figures_are_data_with_enough_seeds_and_no_colons_in_file_nam
         for r in runs:
             per_curve[(r.label, r.cfg.env)] += 1
         assert 3 <= min(per_curve.values()) and max(per_curve.values()) <= 5, fig
-        assert len({experiments.run_id(r.cfg) for r in runs}) == len(runs)
-        assert all(":" not in experiments.run_id(r.cfg) for r in runs)
+        assert len({r.cfg.run_id() for r in runs}) == len(runs)
+        assert all(":" not in r.cfg.run_id() for r in runs)
         assert {"oappo", "happo", "mappo", "seac"} <= labels, fig
     # SMAX's cpu grid: the small maps and two of the paper's, each with its own steps; MMM2's
     # stand-in at paper only
     assert {r.cfg.env: r.cfg.steps for r in cpu["fig4_smax"]} == {
         "smax:3m": 300_000, "smax:2s3z": 1_000_000, "smax:6h_vs_8z": 1_000_000, "smax:3s5z_vs_3s6z": 3_000_000}
-    # issue 32: every family at its sweep's choice, OAPPO's per-kind reading only where kinds differ,
-    # and the 3M-step map for MAPPO, HAPPO and the per-kind reading alone
+    # issue 32: every family at its sweep's choice, OAPPO's per-type reading only where types differ,
+    # and the 3M-step map for MAPPO, HAPPO and the per-type reading alone
     by_env = {e: {r.label for r in cpu["fig4_smax"] if r.cfg.env == e} for e in figures.get_figure("fig4_smax").envs("cpu")}
     assert "oappo type" in by_env["smax:2s3z"] and "oappo type" not in by_env["smax:3m"] | by_env["smax:6h_vs_8z"]
     assert by_env["smax:3s5z_vs_3s6z"] == set(figures.smax.LONG_SMAX_CURVES)
@@ -174,7 +174,7 @@ def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
     df = experiments.load_figure("fig4_smax", "smoke", skip_missing=True)
     assert set(df["label"]) == {runs[0].label} and len(df) == len(cfg.eval_steps) == 3
     assert experiments.missing_runs("fig4_smax", "smoke") == runs[1:]
-    with pytest.raises(FileNotFoundError, match=f"run {experiments.run_id(runs[1].cfg)} of fig4_smax .*not on disk"):
+    with pytest.raises(FileNotFoundError, match=f"run {runs[1].cfg.run_id()} of fig4_smax .*not on disk"):
         experiments.load_figure("fig4_smax", "smoke")  # loading never trains
 
 

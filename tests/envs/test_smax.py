@@ -142,7 +142,7 @@ def test_oappo_warmed_up_for_the_whole_run_is_bitwise_happo_on_smax(env, tmp_pat
 
 def test_the_readings_of_the_networks_on_smax(env, tmp_path):
     """Issue 31's readings on an engine with action masks and agents that die: 3m's three
-    marines are one kind, so one net per kind is one shared net and OAPPO is MAPPO bit for bit;
+    marines are one type, so one net per type is one shared net and OAPPO is MAPPO bit for bit;
     a shared net updated seat by seat with M = I (lambda = 1) is the shared-actor HAPPO bit for
     bit; one net per seat updated seat by seat is HAPPO bit for bit."""
     cfg = dict(env="smax:3m", n_envs=N, rollout_len=10, steps=3 * N * 10, eval_every=3, eval_episodes=N,

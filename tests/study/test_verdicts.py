@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from oapo_lite.study import figures, statistics, verdicts as v
+from oapo_lite.study import figures, statistics, tables, verdicts as v
 from oapo_lite.study.claims import judge
 
 
@@ -237,7 +237,7 @@ def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     assert out["2s3z: OAPPO (a net per agent) ends above MAPPO (heterogeneous agents)"].held
     assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].held
     assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_RUN  # no run on that map
-    assert out["2s3z: OAPPO (a net per kind) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
+    assert out["2s3z: OAPPO (a net per type) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
     nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
     assert {x.status for x in judge("fig4_smax", nothing)} == {v.NOT_TESTABLE, v.NOT_RUN}  # maps without runs: not run
     one_seed = {x.claim: x for x in judge("fig4_smax", win_curves(learned, seeds=1))}
@@ -372,13 +372,13 @@ def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
                 rows += [{"env": env, "label": label, "seed": seed, "step": s, "reuse_matrix": m,
                           "iterations_reusing": every, "ret": float(s >= 7) * (seed + 1)} for s in range(10)]
     owners = {("e1", "mappo"): [0, 0], ("e2", "mappo"): [0, 1]} | {(e, "happo"): [0, 1] for e in ("e1", "e2")}
-    t = v.reuse_table(pd.DataFrame(rows), "ret", owners)
+    t = tables.reuse_table(pd.DataFrame(rows), "ret", owners)
     assert t.index.tolist() == [("e1", "mappo"), ("e1", "happo"), ("e2", "mappo"), ("e2", "happo")]
     assert t["seeds"].tolist() == [2] * 4 and t["all_iterations"].tolist() == [1.0, 0.0, 1.0, 0.0]
     assert t["mean_peer_share"].tolist() == [0.5, 0.0, 0.5, 0.0]
     assert t["mean_across_nets"].tolist() == [0.0, 0.0, 0.5, 0.0]  # one net on e1: no reuse across nets
     assert t["across_reusing"].tolist() == [0.0, 0.0, 1.0, 0.0]
-    assert v.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), "ret", owners).empty  # SEAC-like runs
+    assert tables.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), "ret", owners).empty  # SEAC-like runs
     assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth (at least 3 evaluations): 1 and 2
 
 
@@ -390,7 +390,7 @@ def test_sweep_table_chooses_the_best_final_value_and_breaks_ties_by_speed():
         for seed in (0, 1):
             rows += [{"label": label, "seed": seed, "step": s * 10, "eval_success": level if s >= reach else 0.0}
                      for s in range(10)]
-    t = v.sweep_table(pd.DataFrame(rows), {"a": "f", "b": "f", "c": "f", "d": "g"}, v.WIN_RATE)
+    t = tables.sweep_table(pd.DataFrame(rows), {"a": "f", "b": "f", "c": "f", "d": "g"}, v.WIN_RATE)
     assert t["chosen"].to_dict() == {"a": False, "b": True, "c": False, "d": True}
     assert t.loc["b", "steps"] == 20 and t.loc["d", "steps"] == 90  # never reached 0.5: counted at its end
     assert t.loc["a", "final"] == pytest.approx(0.9) and t["seeds"].tolist() == [2] * 4

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from oapo_lite.study import claims, figures, verdicts
+from oapo_lite.study import claims, figures, tables, verdicts
 
 import fakes
 
@@ -53,13 +53,13 @@ def test_glance_budgets_are_shares_of_the_paper():
 
 
 def test_the_a2c_settings_are_what_their_committed_sweep_chooses():
-    """``figures.smax.A2C_CHOSEN`` is the setting ``verdicts.sweep_table``'s rule picks from the committed
+    """``figures.smax.A2C_CHOSEN`` is the setting ``tables.sweep_table``'s rule picks from the committed
     SEAC / SePS sweep on 3m, per algorithm."""
     from oapo_lite.study import experiments
 
     df = experiments.read_figure("fig_a2c_smax", "cpu")[0]
     family = {label: label.split()[0] for label in df["label"].unique()}
-    table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
+    table = tables.sweep_table(df, family, verdicts.WIN_RATE)
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["a2c_lr", "entropy_coef"]].iloc[0])
             for label, f in chosen["family"].items()} == figures.smax.A2C_CHOSEN
@@ -72,7 +72,7 @@ def test_each_familys_smax_setting_is_what_its_committed_sweep_chooses():
 
     df = experiments.read_figure("fig_sweep_2s3z", "cpu")[0]
     family = {label: label.split(" lr=")[0] for label in df["label"].unique()}
-    table = verdicts.sweep_table(df, family, verdicts.WIN_RATE)
+    table = tables.sweep_table(df, family, verdicts.WIN_RATE)
     chosen = table[table["chosen"]]
     assert {f: tuple(df.loc[df["label"] == label, ["lr", "entropy_coef", "clip"]].iloc[0])
             for label, f in chosen["family"].items()} == figures.smax.SWEEP_CHOSEN

@@ -59,6 +59,7 @@ def _batch(n_envs=4, seed=0):
     env = make_vec("black_blue_red", n_envs, 50)
     actors = Actors(3, env.obs_dim, env.n_actions, (16,), False, torch.Generator().manual_seed(seed))
     batch, step = collect(env, env.reset(), actors, [0, 1, 2], 5, torch.Generator().manual_seed(seed + 1))
+    assert np.array_equal(batch.next_obs.numpy(), step.obs)  # the rollout carries where it ended
     return env, actors, batch, torch.from_numpy(step.obs)
 
 
@@ -103,7 +104,7 @@ def test_lambda_zero_is_plain_a2c_independent_shared_or_grouped(owner):
     env, actors, batch, next_obs = _batch()
     a2c = _learner(actors, env.obs_dim, 0.0)
     ref = copy.deepcopy(a2c)
-    a2c.learn(batch, next_obs, owner)
+    a2c.step(batch, owner)
     _reference_a2c_step(ref, batch, next_obs, owner)
     for c in range(3):
         for p, q in zip(a2c.params(c), ref.params(c)):

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from oapo_lite.envs.layouts import LAYOUTS
-from oapo_lite.study import experiments, figures, layout_study
+from oapo_lite.study import figures, layout_study
 
 import fakes
 
@@ -11,7 +11,7 @@ import fakes
 def test_grid_has_every_curve_on_every_layout_once():
     runs = layout_study.study_runs("paper")
     assert len(runs) == len(LAYOUTS) * 7 * 5  # 7 curves, 5 seeds
-    assert len({experiments.run_id(cfg) for *_, cfg in runs}) == len(runs)
+    assert len({cfg.run_id() for *_, cfg in runs}) == len(runs)
     by_label = {label: cfg for _, label, cfg in runs}
     assert {c.reuse_lambda for c in by_label.values() if c.algo == "oappo"} == set(figures.mazes.LAMBDAS)
     assert by_label["happo"].algo == "happo" and by_label["mappo"].algo == "mappo"

@@ -247,13 +247,13 @@ def test_oappo_with_one_shared_network_and_uniform_reuse_is_bitwise_mappo(tmp_pa
     assert not _same(_params(tmp_path, "mappo"), _params(tmp_path, "happo"))
 
 
-BLACK_BLACK = MAPS["black_red"].replace("agents: red black", "agents: black black")  # one kind of seat
+BLACK_BLACK = MAPS["black_red"].replace("agents: red black", "agents: black black")  # one type of seat
 LONE_BLACK = MAPS["black_red"].replace("agents: red black\nstart: 7,4 7,4", "agents: black\nstart: 7,4")
 
 
 def test_networks_per_type_are_per_agent_for_distinct_types_and_mappo_for_one_type(tmp_path):
-    """Issue 31's second reading: seats of one kind share a net. Black-Red's two seats are of
-    two kinds, so it is today's OAPPO bit for bit; with two black seats it is one shared net,
+    """Issue 31's second reading: seats of one type share a net. Black-Red's two seats are of
+    two types, so it is today's OAPPO bit for bit; with two black seats it is one shared net,
     at KL 0 from itself, so Eq. 9's rows average to 1/2 per source: MAPPO bit for bit."""
     _run(tmp_path, "oappo", algo="oappo", **SMALL_BR)
     _run(tmp_path, "type", algo="oappo", networks="type", **SMALL_BR)
@@ -263,7 +263,7 @@ def test_networks_per_type_are_per_agent_for_distinct_types_and_mappo_for_one_ty
     rows = _run(tmp_path, "type1", algo="oappo", networks="type", **one_kind)
     assert _same(_params(tmp_path, "mappo"), _params(tmp_path, "type1"))
     assert (rows["kl_matrix"].iloc[-1] == 0).all()  # one net: every seat at distance 0
-    _run(tmp_path, "mappo_br", algo="mappo", **SMALL_BR)  # on Black-Red the kinds differ: not MAPPO
+    _run(tmp_path, "mappo_br", algo="mappo", **SMALL_BR)  # on Black-Red the types differ: not MAPPO
     assert not _same(_params(tmp_path, "mappo_br"), _params(tmp_path, "type"))
 
 

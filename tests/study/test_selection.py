@@ -22,10 +22,10 @@ def test_the_ablation_pairs_its_curves_on_seeds_that_chose_no_setting():
         # the same settings but the reuse rule: the same networks, so the same initial weights per seed
         assert always.sigma == np.inf and gated.sigma == figures.SELECTION_SIGMA[env, "agent"]
         for other in (always, gated):
-            assert (other.lr, other.entropy_coef, other.clip, other.network_kind, other.steps) == \
-                (happo.lr, happo.entropy_coef, happo.clip, happo.network_kind, happo.steps)
-    own, kind = by["smax:2s3z", "oappo type own kind"], by["smax:2s3z", "oappo type gated"]
-    assert own.reuse_lambda == 1.0 and kind.reuse_lambda == 0.7 and own.network_kind == kind.network_kind == "type"
+            assert (other.lr, other.entropy_coef, other.clip, other.networks_used, other.steps) == \
+                (happo.lr, happo.entropy_coef, happo.clip, happo.networks_used, happo.steps)
+    own, kind = by["smax:2s3z", "oappo type own type"], by["smax:2s3z", "oappo type gated"]
+    assert own.reuse_lambda == 1.0 and kind.reuse_lambda == 0.7 and own.networks_used == kind.networks_used == "type"
     # HalfCheetah: the normalised learner fig_mamujoco_normalize chose, at App. A's settings
     cheetah = {r.label: r.cfg for r in figures.runs_of("fig_selection_mamujoco", "cpu") if r.cfg.seed == 10}
     app_a = next(r.cfg for r in figures.runs_of("figA_mamujoco", "cpu") if r.label == "happo")

@@ -6,7 +6,7 @@ from oapo_lite.study import gate_study
 
 def _rows(env: str, values: dict, same_kind=(True, False), gap: dict | None = None) -> list[dict]:
     """Two learners, each with one peer; ``values[stat]`` is K per iteration of the first pair,
-    the second (cross-kind) pair is ``gap[stat]`` (default 1) farther."""
+    the second (cross-type) pair is ``gap[stat]`` (default 1) farther."""
     gap = {s: 1.0 for s in values} | (gap or {})
     return [{"env": env, "seed": 0, "iteration": it + 1, "step": (it + 1) * 100, "learner": learner,
              "peer": 1 - learner, "same_kind": same, **{s: v[it] + (0.0 if same else gap[s]) for s, v in values.items()}}
@@ -17,11 +17,11 @@ def test_summary_counts_open_iterations_pairs_and_the_kind_separation():
     df = pd.DataFrame(_rows("smax:2s3z", {"max": [5.0, 5.0, 5.0, 5.0], "mean": [0.0, 0.05, 0.5, 5.0],
                                           "q90": [0.05, 5.0, 5.0, 5.0]}))
     t = gate_study.summary(df, sigmas=(0.1,)).xs(0.1, level="sigma").loc["smax:2s3z"]
-    # the same-kind pair is within 0.1 at iterations 1-2 (mean), 1 (q90), never (max)
+    # the same-type pair is within 0.1 at iterations 1-2 (mean), 1 (q90), never (max)
     assert t["open"].to_dict() == {"max": 0.0, "mean": 0.5, "q90": 0.25}
     assert t["pairs"].to_dict() == {"max": 0.0, "mean": 0.25, "q90": 0.125}
     assert t["last open"].to_dict() == {"max": 0, "mean": 200, "q90": 100}
-    assert (t["auc"] == 1.0).all()  # the same-kind pair is always the nearer one
+    assert (t["auc"] == 1.0).all()  # the same-type pair is always the nearer one
 
 
 def test_choose_follows_the_rule_fixed_before_the_runs():

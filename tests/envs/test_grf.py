@@ -15,7 +15,7 @@ from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.nets import Actors
 from oapo_lite.neural.rollout import episode_scores
 from oapo_lite.neural.train import train
-from oapo_lite.study import experiments, figures, grid
+from oapo_lite.study import figures, grid
 
 SCENARIO = "academy_3_vs_1_with_keeper"
 needs_grf = pytest.mark.skipif(not grf.installed() and not os.environ.get("CI"),
@@ -159,7 +159,7 @@ def test_fig6b_budgets_are_data_and_every_run_has_its_own_id():
     for budget in grid.ENGINE_BUDGETS:
         runs = figures.figure_runs("fig6b", budget)
         assert {label for label, _ in runs} == set(figures.grf.FIG6B_ALGOS)
-        assert len({experiments.run_id(cfg) for _, cfg in runs}) == len(runs)
+        assert len({cfg.run_id() for _, cfg in runs}) == len(runs)
     paper = figures.figure_runs("fig6b", "paper")
     assert {cfg.env for _, cfg in paper} == {f"grf:{s}" for s in grf.SCENARIOS}
     assert {cfg.steps for _, cfg in paper if cfg.env == "grf:academy_counterattack_hard"} == {50_000_000}

@@ -63,19 +63,19 @@ def test_shared_table_stays_below_the_separate_optimum_on_black_red(maze_game):
 
 
 def test_same_seed_same_records_other_seed_other_records(maze_game):
-    cfg = TabularConfig(algo="oappo", iterations=4, reuse="sample", seed=5)
+    cfg = TabularConfig(algo="oappo", iterations=4, reuse_mode="sample", seed=5)
     a, b = run_tabular(maze_game, cfg), run_tabular(maze_game, cfg)
     for x, y in zip(a, b):
         for field in ("J", "improvement", "bound", "bound_written"):
             assert getattr(x, field) == getattr(y, field)
         for field in ("M", "mapping", "order", "kl", "step_kl", "policies"):
             np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
-    c = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=4, reuse="sample", seed=6))
+    c = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=4, reuse_mode="sample", seed=6))
     assert not np.array_equal(a[-1].policies, c[-1].policies)
 
 
 def test_sample_mode_draws_one_source_per_learner_from_m(maze_game):
-    records = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=5, reuse="sample", sigma=10.0))
+    records = run_tabular(maze_game, TabularConfig(algo="oappo", iterations=5, reuse_mode="sample", sigma=10.0))
     for r in records:
         assert r.mapping.shape == (2,)
         assert (r.M[np.arange(2), r.mapping] > 0).all()
@@ -134,12 +134,28 @@ def test_sampled_mode_tracks_exact_mode_on_black_red(maze_game):
 def test_config_rejects_bad_values():
     with pytest.raises(ValueError, match="algo must be one of"):
         TabularConfig(algo="ippo")
-    with pytest.raises(ValueError, match="reuse must be one of"):
-        TabularConfig(reuse="all")
+    with pytest.raises(ValueError, match="reuse_mode must be one of"):
+        TabularConfig(reuse_mode="all")
     with pytest.raises(ValueError, match="iterations must be >= 1"):
         TabularConfig(iterations=0)
     with pytest.raises(ValueError, match="clip must be > 0"):
         TabularConfig(clip=0.0)
+
+
+def test_a_renamed_keyword_is_refused_naming_its_new_name():
+    """The two tracks share one name per concept (the neural track's, its run files' columns)."""
+    from oapo_lite.algorithms import AlgoSpec
+    from oapo_lite.reuse import reduce_kl
+
+    for call, old, new in ((lambda: TabularConfig(epochs=3), "epochs", "ppo_epochs"),
+                           (lambda: TabularConfig(reuse="sample"), "reuse", "reuse_mode"),
+                           (lambda: AlgoSpec(reuse="own", sequential=True, trust_region=False, networks="agent"),
+                            "reuse", "reuse_rule"),
+                           (lambda: AlgoSpec("own", True, False, shared=False), "shared", "networks"),
+                           (lambda: reduce_kl(np.zeros((2, 2, 3)), reduce="max"), "reduce", "kl_reduce")):
+        with pytest.raises(TypeError, match=f"keyword {old}= was renamed {new}=$"):
+            call()
+    assert TabularConfig(ppo_epochs=3, reuse_mode="sample").ppo_epochs == 3  # the new names work
 
 
 @pytest.mark.parametrize("kwargs, match", [(dict(sigma=-1.0), "sigma"), (dict(reuse_lambda=3.0), "lambda")])

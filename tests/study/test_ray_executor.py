@@ -147,5 +147,5 @@ def test_a_run_that_raises_is_reported_and_the_others_complete(executor, request
     assert error.startswith("error: ") and "allowed mask has shape (3, 3), expected (2, 2)" in error
     assert "Traceback" not in error
     reported = capsys.readouterr().err
-    assert experiments.run_id(count.failed[0].run.cfg) in reported and "'allowed': '[[1, 1, 1]" in reported
+    assert count.failed[0].run.cfg.run_id() in reported and "'allowed': '[[1, 1, 1]" in reported
     assert "allowed mask has shape (3, 3)" in reported

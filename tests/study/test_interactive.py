@@ -10,7 +10,7 @@ import pytest
 
 from oapo_lite.study import interactive
 
-NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
+NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"
 RANGES = dict(sigma=[0.01, 0.1, 1.0, 10.0], reuse_lambda=(0.2, 1.0, 0.1), n=(1, 5))
 FIRST = dict(sigma=0.01, reuse_lambda=0.2, n=1)
 
