@@ -56,7 +56,7 @@ grf: .venv/grf-installed
 reproduce: venv
 	$(PY) -m oapo_lite reproduce --budget $(BUDGET)
 
-# tests/test_book.py builds the book and opens every page in headless Chromium; tests/test_grf.py
+# tests/test_book.py builds the book and opens every page in headless Chromium; tests/envs/test_grf.py
 # needs the real GRF engine. tests/numeric_paths.py runs the numeric unit tests again, and nbval
 # (the committed notebook outputs, executed again here and compared as text), under numeric paths
 # that pick other floating-point kernels on this machine, as another CPU would; it prints how many
