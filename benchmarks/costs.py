@@ -1,9 +1,10 @@
 """The committed cost table (``figures/data/costs.csv``) that ``reproduce --plan`` prices a run
 by where no finished run of its kind has a record: for every distinct cost key
 (``study.costs.cost_key``) among the runs of the given budgets, one run of that key trained for
-one evaluation period (``eval_every`` iterations and the evaluation that closes them), and its
-CPU and wall seconds per 1,000 env steps from its own record (``cpu_s``, ``wall_s``), less
-building the envs and the evaluation before training. Written atomically after every key, with
+one evaluation period (at most ``CAP`` env steps) and an evaluation, and its CPU and wall
+seconds per 1,000 env steps from its own record (``cpu_s``, ``wall_s``): training per step, and
+the evaluation spread over the key's evaluation period; building the envs and the evaluation
+before training are left out. Written atomically after every key, with
 the CPU it was measured on and the git revision, so an interrupted measurement resumes.
 
     .venv/bin/python benchmarks/costs.py [--budgets cpu paper] [--again]
@@ -23,7 +24,7 @@ import pandas as pd
 
 from oapo_lite.envs import registry
 from oapo_lite.neural.cost import machine
-from oapo_lite.neural.runstate import git_revision
+from oapo_lite.neural.runstate import git_revision, load_history
 from oapo_lite.neural.train import train
 from oapo_lite.store import write_frame
 from oapo_lite.study import experiments, grid
@@ -32,17 +33,25 @@ from oapo_lite.study.costs import COSTS, KEY, cost_key
 from loops import warm_up
 
 
+CAP = 64_000  # env steps measured at most: a paper budget's evaluation period can be hundreds of thousands
+
+
 def measure(cfg) -> dict:
-    """One evaluation period of ``cfg`` (from seed 0's start): CPU and wall seconds per 1,000 env steps."""
-    short = dataclasses.replace(cfg, steps=cfg.eval_every * cfg.iteration_steps,
+    """``cfg`` from seed 0's start for one evaluation period, or as many iterations as fit in
+    ``CAP`` steps, closed by an evaluation: CPU and wall seconds per 1,000 env steps, as its
+    training per step plus one evaluation's cost spread over the period (``cfg.eval_every``)."""
+    k = max(1, min(cfg.eval_every, CAP // cfg.iteration_steps))
+    short = dataclasses.replace(cfg, steps=k * cfg.iteration_steps, eval_every=k,
                                 **({"seps_pretrain_steps": min(cfg.seps_pretrain_steps, cfg.iteration_steps)}
                                    if cfg.algo == "seps" else {}))
     with tempfile.TemporaryDirectory() as out:
         rows = train(short, out, progress=False)
+        trained = load_history(out)[-1]  # the sums after the last iteration, before its evaluation
     first, last = rows.iloc[0], rows.iloc[-1]
-    steps = int(last["step"] - first["step"])
-    return {"cpu_per_kstep": 1000 * (last["cpu_s"] - first["cpu_s"]) / steps,
-            "wall_per_kstep": 1000 * (last["wall_s"] - first["wall_s"]) / steps, "measured_steps": steps}
+    period = cfg.eval_every * cfg.iteration_steps
+    return {f"{clock}_per_kstep": 1000 * ((trained[f"{clock}_s"] - first[f"{clock}_s"]) / short.steps
+                                          + (last[f"{clock}_s"] - trained[f"{clock}_s"]) / period)
+            for clock in ("cpu", "wall")} | {"measured_steps": short.steps}
 
 
 def main() -> int:

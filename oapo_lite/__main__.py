@@ -21,11 +21,23 @@ import time
 from pathlib import Path
 
 from oapo_lite import cli
-from oapo_lite.envs.maps import MAPS, parse_maze
 
 
 def _none_or(kind):
     return lambda text: None if text.lower() == "none" else kind(text)
+
+
+def _mask_or_scheme(text: str):
+    """``--allowed``: a scheme's name, or a mask as JSON (``[[1, 0], [0, 1]]``)."""
+    if not text.lstrip().startswith("["):
+        return text
+    import json
+
+    try:
+        return json.loads(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is no JSON list; allowed: a scheme or a mask such as "
+                                         "[[1, 0], [0, 1]]") from None
 
 
 def _bool(text: str) -> bool:
@@ -46,6 +58,7 @@ class _Renamed(argparse.Action):
 
 
 def train_parser() -> argparse.ArgumentParser:
+    from oapo_lite.envs.maps import MAPS
     from oapo_lite.neural.config import ALLOWED, MEANING, RENAMED, TrainConfig
 
     parser = cli.Parser(prog="python -m oapo_lite train", usage="%(prog)s [--algo ALGO] [--env ENV] [--seed SEED] "
@@ -55,7 +68,7 @@ def train_parser() -> argparse.ArgumentParser:
                         "None or True / False.")
     special = {
         "hidden": dict(type=int, nargs="+"),
-        "allowed": dict(type=_none_or(str)),
+        "allowed": dict(type=_none_or(_mask_or_scheme)),
         "networks": dict(type=_none_or(str)),
         "bootstrap_truncation": dict(type=_none_or(_bool)),
         "reuse_adapt": dict(type=_none_or(str)),
@@ -128,6 +141,7 @@ def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
 def train_main(argv: list[str]) -> int:
     import pandas as pd
 
+    from oapo_lite.envs.maps import MAPS, parse_maze
     from oapo_lite.neural.config import TrainConfig
     from oapo_lite.neural.train import train
     from oapo_lite.study.experiments import run_id
@@ -139,6 +153,9 @@ def train_main(argv: list[str]) -> int:
         not args.pop("no_progress")
     tensorboard = args.pop("tensorboard")
     name, file_name = args["env"], None
+    if not name.strip():
+        raise ValueError(f"--env {name!r} is empty; allowed: a built-in map {sorted(MAPS)}, a map file or "
+                         "<engine>:<name>")
     if name not in MAPS and Path(name).is_dir():
         raise ValueError(f"--env {name!r} is a folder; allowed: a built-in map {sorted(MAPS)}, a map file or "
                          "<engine>:<name>")
@@ -207,6 +224,8 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
+        with cli.uninterrupted():  # an interrupt during the import waits for its end
+            import torch  # noqa: F401
         return COMMANDS[argv[0]](argv[1:])
     except KeyboardInterrupt:
         print("interrupted; run the same command again to resume", file=sys.stderr)
@@ -219,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     # Ctrl-C stops every command, even one started where SIGINT is ignored (a script's `cmd &`
-    # inherits SIG_IGN, and Python then keeps it)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    sys.exit(main())
+    # inherits SIG_IGN, and Python then keeps it), and SIGTERM as Ctrl-C does; the heavy imports
+    # come after, inside main, where an interrupt is one line
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, cli.interrupt)
+    status = main()
+    for sig in (signal.SIGINT, signal.SIGTERM):  # a late signal cannot turn the exit status into a traceback
+        signal.signal(sig, signal.SIG_IGN)
+    sys.exit(status)

@@ -4,9 +4,11 @@ traceback (``--debug`` or ``OAPO_DEBUG=1``), with exit status 1."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import os
 import re
+import signal
 import sys
 from pathlib import Path
 
@@ -61,7 +63,31 @@ def output_folder(text: str, what: str) -> Path:
         raise ValueError(f"{what} {text!r} is the filesystem root; allowed: a folder below it")
     if path.exists() and not path.is_dir():
         raise ValueError(f"{what} {text!r} is a file; allowed: a folder")
+    above = next(p for p in path.parents if p.exists())
+    if not above.is_dir():
+        raise ValueError(f"{what} {text!r} lies below {str(above)!r}, which is a file; allowed: a folder")
     return path
+
+
+def interrupt(signum, frame):
+    """The handler of Ctrl-C and SIGTERM in every command: the first stops the work (a
+    KeyboardInterrupt, which the command turns into one line and exit status 130); later ones
+    are ignored, so that none can break the stop itself (workers are killed at once, so a stop
+    never waits)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def uninterrupted():
+    """Ctrl-C and SIGTERM held back while the block runs, and delivered after it: torch's import
+    runs C++ that calls Python, and a KeyboardInterrupt raised there aborts the process."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def debug_requested(argv: list[str]) -> bool:

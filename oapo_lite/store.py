@@ -54,6 +54,8 @@ def remove_stale_tmp(path: Path) -> None:
 def atomic_write(write: Callable[[str], None], path: Path) -> None:
     """``write(tmp)`` next to ``path``, then rename: a reader sees the old file or the whole new one."""
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder where a file is to be written; delete or move it")
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_tmp(path)
     tmp = _tmp_name(path, os.getpid())
@@ -98,11 +100,18 @@ def write_frame(df: pd.DataFrame, path: Path) -> None:
 
 
 def read_arrays(df: pd.DataFrame, columns) -> pd.DataFrame:
-    """``df`` with the JSON text of ``columns`` (those it has) turned back into arrays."""
-    def array(x):
-        return np.array(json.loads(x)) if isinstance(x, str) else x
+    """``df`` with the JSON text of ``columns`` (those it has) turned back into arrays; a cell
+    that is not JSON raises ``ValueError`` naming its column and row."""
+    def arrays(column: str) -> list:
+        out = []
+        for i, x in enumerate(df[column]):
+            try:
+                out.append(np.array(json.loads(x)) if isinstance(x, str) else x)
+            except ValueError as err:
+                raise ValueError(f"its {column} column at row {i + 1} holds {x[:40]!r}, which is not JSON ({err})") from None
+        return out
 
-    return df.assign(**{c: df[c].map(array) for c in columns if c in df.columns})
+    return df.assign(**{c: arrays(c) for c in columns if c in df.columns})
 
 
 class Lock:

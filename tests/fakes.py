@@ -1,9 +1,12 @@
 """Fake finished runs, written as the run cache holds real ones (every evaluation row of the
 config, with the config's columns)."""
+import json
+
 import numpy as np
 import pandas as pd
 
 from oapo_lite import store
+from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.oracle import optimal_return
 from oapo_lite.study import experiments
@@ -21,9 +24,22 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     df = pd.DataFrame({**config, "iteration": steps // cfg.iteration_steps, "step": steps,
                        "eval_return": value * optimum if maze is not None else value,
                        "frac_opt": value if maze is not None else np.nan, "eval_success": np.clip(value, 0, 1),
-                       "git_rev": "test", **columns})
+                       "git_rev": "test", **learner_columns(cfg, len(steps)), **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))
     return df
+
+
+def learner_columns(cfg, rows: int) -> dict:
+    """What every run of ``cfg``'s family writes after its first iteration (empty at the first
+    evaluation): a PPO / TRPO run's objective, critic loss, K and M (no reuse), an A2C run's losses."""
+    def later(x):
+        return [np.nan] + [x] * (rows - 1)
+
+    if ALGOS[cfg.algo].a2c:
+        return {"policy_loss": later(0.0), "value_loss": later(0.1), "entropy": later(1.0)}
+    n = len(env_registry.agent_types(cfg.env, cfg.max_steps))
+    return {"objective": later(0.0), "value_loss": later(0.1), "kl_matrix": later(json.dumps(np.zeros((n, n)).tolist())),
+            "reuse_matrix": later(json.dumps(np.eye(n).tolist()))}
 
 
 def interrupt(cfg, out, at: int) -> None:

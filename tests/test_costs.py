@@ -19,20 +19,20 @@ def _table(path, prices: dict) -> None:
 def test_a_plan_prices_what_would_train_and_trains_and_writes_nothing(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
     monkeypatch.setattr(costs, "COSTS", tmp_path / "costs.csv")
-    oappo, oatrpo, mappo, happo = (next(r for r in grid.runs_of("fig3b", "smoke") if r.label == label)
-                                   for label in ("oappo", "oatrpo", "mappo", "happo"))
+    oappo, oatrpo, mappo, happo, hatrpo = (next(r for r in grid.runs_of("fig3b", "smoke") if r.label == label)
+                                           for label in ("oappo", "oatrpo", "mappo", "happo", "hatrpo"))
     fakes.write_run(oappo.cfg, "smoke", lambda s: s / 400, cpu_s=2.0, wall_s=1.0, cpu_model="x", cpu_count=2)
     fakes.write_run(oatrpo.cfg, "smoke", lambda s: s / 400)  # finished before costs were recorded
-    _table(costs.COSTS, {costs.cost_key(mappo.cfg): 50.0})  # HAPPO has no price
+    _table(costs.COSTS, {costs.cost_key(mappo.cfg): 50.0})  # HAPPO and HATRPO have no price
     before = sorted(tmp_path.rglob("*"))
     (fig,), total, wall = costs.plan("smoke", ["fig3b"], workers=2)
     assert sorted(tmp_path.rglob("*")) == before  # read only
-    assert (fig.runs, fig.cached_runs, fig.todo_runs, fig.unpriced, fig.sources) == (4, 2, 2, 1, "table")
+    assert (fig.runs, fig.cached_runs, fig.todo_runs, fig.unpriced, fig.sources) == (5, 2, 3, 2, "table")
     assert fig.cpu_hours == pytest.approx(50.0 * mappo.cfg.steps / 1000 / 3600) and wall == pytest.approx(fig.cpu_hours)
-    assert total.todo_steps == mappo.cfg.steps + happo.cfg.steps
+    assert total.todo_steps == mappo.cfg.steps + happo.cfg.steps + hatrpo.cfg.steps
     assert cli.main(["reproduce", "--budget", "smoke", "--figures", "fig3b", "--plan"]) == 0
     out = capsys.readouterr().out
-    assert "1 run(s) to train have no measured cost" in out and "nothing was trained or written" in out
+    assert "2 run(s) to train have no measured cost" in out and "nothing was trained or written" in out
     assert "a test CPU (2 cores)" in out and sorted(tmp_path.rglob("*")) == before
 
 

@@ -26,6 +26,12 @@ def test_the_ablation_pairs_its_curves_on_seeds_that_chose_no_setting():
                 (happo.lr, happo.entropy_coef, happo.clip, happo.network_kind, happo.steps)
     own, kind = by["smax:2s3z", "oappo type own kind"], by["smax:2s3z", "oappo type gated"]
     assert own.reuse_lambda == 1.0 and kind.reuse_lambda == 0.7 and own.network_kind == kind.network_kind == "type"
+    # HalfCheetah: the normalised learner fig_mamujoco_normalize chose, at App. A's settings
+    cheetah = {r.label: r.cfg for r in grid.runs_of("fig_selection_mamujoco", "cpu") if r.cfg.seed == 10}
+    app_a = next(r.cfg for r in grid.runs_of("figA_mamujoco", "cpu") if r.label == "happo")
+    assert all(c.normalize and c.ppo_epochs == app_a.ppo_epochs and c.n_envs == app_a.n_envs for c in cheetah.values())
+    assert cheetah["oappo always"].sigma == np.inf and {r.cfg.seed for r in grid.runs_of(
+        "fig_selection_mamujoco", "cpu")} == set(grid.SELECTION_SEEDS)
 
 
 def test_gate_use_counts_the_across_network_pairs_open_and_shut():

@@ -158,7 +158,7 @@ def test_stuck_with_some_seeds_escaping_is_direction_only():
 
 def test_figure_claims_follow_the_data():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
-                   "oatrpo": (30_000, 1.0)})
+                   "oatrpo": (30_000, 1.0), "hatrpo": (60_000, 1.0)})
     assert all(x.held for x in judge("fig3b", good))
     bad = curves({"mappo": (20_000, 1.0), "happo": (30_000, 1.0), "oappo": (50_000, 1.0),
                   "oatrpo": (90_000, 1.0)})
@@ -171,7 +171,7 @@ def test_figure_claims_follow_the_data():
 
 def test_claim_table_has_a_row_per_budget_and_claim():
     good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
-                   "oatrpo": (30_000, 1.0)})
+                   "oatrpo": (30_000, 1.0), "hatrpo": (60_000, 1.0)})
     table = v.claim_table({"five": judge("fig3b", good), "one": judge("fig3b", good[good["seed"] == 0])})
     assert len(table) == 2 * len(grid.get_figure("fig3b").claims)
     by = table.set_index("budget")
@@ -480,3 +480,18 @@ def test_a_returns_final_value_is_its_last_fifth_and_its_initial_its_first_tenth
     assert run["final"] == np.mean([17, 18, 19, 20]) and run["initial"] == np.mean([0, 1])
     # a tenth of 21 is 2 evaluations: the window holds 3 at least
     assert v.Evidence(df.rename(columns={"eval_return": "frac_opt"})).runs.iloc[0]["final"] == np.mean([18, 19, 20])
+
+
+def test_steadier_is_judged_over_the_seeds_that_learned_and_faster_says_who_never_got_there():
+    # one seed of "steady" never leaves 0: it has no drop, and would otherwise rank as the steadiest
+    df = win_curves({"steady": [0, 0.3, 0.6, 0.8, 0.8], "shaky": [0, 0.6, 0.1, 0.7, 0.8]})
+    df.loc[(df["label"] == "steady") & (df["seed"] == 0), "eval_success"] = 0.0
+    ev = v.Evidence(df, metric=v.WIN_RATE)
+    verdict = v.stabler(ev, "steady", "shaky", "steady improves more stably")
+    assert "over 4 seeds that learned" in verdict.evidence and verdict.held
+    df.loc[(df["label"] == "steady") & (df["seed"] > 0), "eval_success"] = 0.0
+    lone = v.stabler(v.Evidence(df, metric=v.WIN_RATE), "steady", "shaky", "x")
+    assert lone.status == v.NOT_TESTABLE and lone.reason == "fewer than 2 seeds that learned: steady (0 of 5)"
+    slow = win_curves({"fast": [0, 0.6, 0.8, 0.8, 0.8], "slow": [0, 0.1, 0.3, 0.4, 0.45]})
+    said = v.faster(v.Evidence(slow, metric=v.WIN_RATE), "fast", "slow", "x")
+    assert said.reason.endswith("; slow did not reach a 50% win rate in the budget (counted at its end)")

@@ -158,7 +158,7 @@ def parse_maze(text: str, name: str = "custom") -> Maze:
     """Parse and validate a map text (see the module docstring for the format)."""
     header: dict[str, list[str]] = {}
     grid: list[str] = []
-    for raw in text.splitlines():
+    for raw in text.removeprefix("\ufeff").splitlines():  # an editor's byte-order mark is no cell
         line = raw.rstrip()
         if not line:
             continue

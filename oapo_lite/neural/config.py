@@ -67,7 +67,10 @@ def _field(default, meaning: str, allowed: str):
     return dataclasses.field(default=default, metadata={"meaning": meaning, "allowed": allowed})
 
 
-POSITIVE, AT_LEAST_0, FRACTION = "a finite number > 0", "a finite number >= 0", "a number in [0, 1]"
+# torch computes in float32: a larger number overflows there (3.4e38 is float32's largest)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+POSITIVE, AT_LEAST_0 = "a number > 0 and below 3.4e38 (float32's largest)", "a number >= 0 and below 3.4e38"
+FRACTION = "a number in [0, 1]"
 WHOLE, SWITCH = "an integer >= 1", "True or False"
 
 
@@ -166,7 +169,7 @@ class TrainConfig:
 
         def real(name: str, ok: Callable[[float], bool], finite: bool = True):
             x = getattr(self, name)
-            need(_is_real(x) and not math.isnan(x) and (math.isfinite(x) or not finite) and ok(x), name)
+            need(_is_real(x) and not math.isnan(x) and (abs(x) <= FLOAT32_MAX or not finite) and ok(x), name)
 
         need(isinstance(self.algo, str) and self.algo in ALGOS, "algo")
         need(self.env_fn is None or callable(self.env_fn), "env_fn")

@@ -108,11 +108,12 @@ class RunState:
                 "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows,
                 "cost": self.cost}
 
-    def load_state_dict(self, ck: dict) -> None:
+    def load_state_dict(self, ck: dict, path: Path | str = "") -> None:
         """Continue from checkpoint ``ck`` (``check_resumable`` first). A run extended to more
         steps has no row where the shorter budget ended off the evaluation grid (evaluating draws
         no shared randomness, so dropping it changes nothing else), and its rows carry the new config."""
-        check_resumable(self.cfg, ck)
+        name = f"checkpoint {path}".rstrip()
+        check_resumable(self.cfg, ck, name)
         try:
             self.actors.load_state_dict(ck["actors"])
             self.learner.load_state_dict(ck["learner"] if "learner" in ck else learner_state_before(ck))
@@ -122,7 +123,11 @@ class RunState:
             self.iteration, self.step, self.history = ck["iteration"], ck["step"], ck["history"]
             self.cost = ck.get("cost")  # absent: the run so far was not measured
         except KeyError as err:
-            raise ValueError(f"checkpoint has no entry {err} (written by an older oapo_lite); {START_AFRESH}") from None
+            raise ValueError(f"{name} has no entry {err} (written by an older oapo_lite); {START_AFRESH}") from None
+        except (RuntimeError, TypeError, ValueError, IndexError, AttributeError) as err:
+            # shapes, generator states, an env's state: what this run cannot take
+            detail = " ".join(str(err).split())[:160]
+            raise DamagedFile(f"{name} does not fit this run ({type(err).__name__}: {detail}); {START_AFRESH}") from None
         config = self.cfg.flat()
         self.rows = [{**r, **config} for r in ck["rows"] if self.cfg.evaluates(r["iteration"])]
 
@@ -162,10 +167,29 @@ def load_checkpoint(out_dir: str | Path) -> dict:
     return ck
 
 
+# what every checkpoint holds (the learner's state under "learner", or, before it had one, its
+# keys at the top level: ``learner_state_before``)
+CHECKPOINT_KEYS = ("config", "iteration", "actors", "act_gen", "torch_rng", "env", "step", "history", "rows")
+
+
 def _inconsistent(ck: dict) -> str | None:
-    """What contradicts itself in a checkpoint's run record, or None: its iteration, one history
-    entry per iteration, and its evaluation rows (the first before training, in order, none past
-    the iteration)."""
+    """What is missing from a checkpoint or contradicts itself, or None: every entry a run needs,
+    of its kind; its iteration, one history entry per iteration, and its evaluation rows (the
+    first before training, in order, none past the iteration)."""
+    missing = [k for k in CHECKPOINT_KEYS if k not in ck] + ([] if "learner" in ck or "critic" in ck or "a2c" in ck
+                                                            else ["learner"])
+    if missing:
+        return f"it has no entries {missing}"
+    kinds = {"config": dict, "actors": dict, "act_gen": torch.Tensor, "torch_rng": torch.Tensor}
+    wrong = [k for k, kind in kinds.items() if not isinstance(ck[k], kind)]
+    wrong += [] if dataclasses.is_dataclass(ck["step"]) else ["step"]
+    wrong += [] if ck["env"] is not None else ["env"]
+    wrong += [] if ck.get("cost") is None or (isinstance(ck["cost"], dict) and all(
+        isinstance(ck["cost"].get(k), float) and ck["cost"][k] >= 0 for k in ("cpu_s", "wall_s"))) else ["cost"]
+    if "learner" in ck and not (isinstance(ck["learner"], dict) and ck["learner"]):
+        wrong.append("learner")
+    if wrong:
+        return f"its entries {wrong} are not what a run writes there"
     it, history, rows = ck.get("iteration"), ck.get("history"), ck.get("rows")
     if not isinstance(it, int) or isinstance(it, bool) or it < 0:
         return f"its iteration is {it!r}, not an integer >= 0"
@@ -194,25 +218,25 @@ def load_history(out_dir: str | Path) -> list[dict]:
     return load_checkpoint(out_dir)["history"]
 
 
-def check_resumable(cfg: TrainConfig, ck: dict) -> None:
-    """A checkpoint can continue ``cfg`` if it has every current field and only ``steps``
-    differs, and grows."""
+def check_resumable(cfg: TrainConfig, ck: dict, name: str = "checkpoint") -> None:
+    """A checkpoint (``name``: "checkpoint" and its path, in the messages) can continue ``cfg`` if
+    it has every current field and only ``steps`` differs, and grows."""
     now, saved = cfg.flat(), ck["config"]
     missing = [k for k in now if k not in saved]
     if missing:
-        raise ValueError(f"checkpoint has no config fields {missing} (written by an older oapo_lite); {START_AFRESH}")
+        raise ValueError(f"{name} has no config fields {missing} (written by an older oapo_lite); {START_AFRESH}")
     differ = [k for k in now if k != "steps" and str(now[k]) != str(saved[k])]
     if differ:
-        raise ValueError(f"checkpoint was written by a different config (fields {differ}); {START_AFRESH}")
+        raise ValueError(f"{name} was written by a different config (fields {differ}); {START_AFRESH}")
     stale = [f.name for f in dataclasses.fields(ck["step"]) if not hasattr(ck["step"], f.name)]
     if stale:
-        raise ValueError(f"checkpoint's environment step has no fields {stale} (written by an older oapo_lite); "
+        raise ValueError(f"{name}'s environment step has no fields {stale} (written by an older oapo_lite); "
                          f"{START_AFRESH}")
     if cfg.lr_anneal and str(now["steps"]) != str(saved["steps"]) and ck["iteration"] > 0:
-        raise ValueError(f"checkpoint was written with steps = {saved['steps']}, and with lr_anneal the learning rate's "
+        raise ValueError(f"{name} was written with steps = {saved['steps']}, and with lr_anneal the learning rate's "
                          f"schedule depends on steps, so it cannot continue with steps = {cfg.steps}; {START_AFRESH}")
     if ck["iteration"] > cfg.n_iterations:
-        raise ValueError(f"checkpoint is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
+        raise ValueError(f"{name} is at iteration {ck['iteration']} (steps = {saved['steps']}), past steps = "
                          f"{cfg.steps} ({cfg.n_iterations} iterations); resuming needs steps >= {saved['steps']}; "
                          f"or {START_AFRESH}")
 

@@ -132,7 +132,7 @@ def _train(state: RunState, out: Path, resume: bool, progress: bool, callback, c
 
     cfg, revision = state.cfg, git_revision()
     if resume and (out / "checkpoint.pt").exists():
-        state.load_state_dict(load_checkpoint(out))
+        state.load_state_dict(load_checkpoint(out), out / "checkpoint.pt")
         save_results(state.rows, out)  # a results.csv deleted or damaged after the checkpoint comes back
     clock.update(env=0.0, policy=0.0, learn=0.0, eval=0.0)
     board = None if tensorboard is None else Board(tensorboard, state.env.agents)

@@ -158,11 +158,17 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
 GLANCE_COLUMNS = ["section", "claim", "notebook", "verdict", "budget", "why", "at 5 seeds", "why at 5 seeds"]
 
 
-def _check_glance(df: pd.DataFrame) -> None:
-    lacking = [c for c in ("section", "claim", "verdict") if c not in df] if isinstance(df, pd.DataFrame) else []
-    if not isinstance(df, pd.DataFrame) or lacking:
+def _check_glance(df: pd.DataFrame, needed=("section", "claim", "verdict")) -> None:
+    """``df`` must be ``glance``'s rows (at least the ``needed`` columns), every verdict a status."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"the claims must be glance()'s DataFrame, got {type(df).__name__}")
+    lacking = [c for c in needed if c not in df]
+    if lacking:
         raise ValueError(f"the claims lack the columns {lacking}; they must be glance()'s rows, with columns "
                          f"{GLANCE_COLUMNS}")
+    unknown = sorted(set(map(str, df["verdict"])) - set(SHORT))
+    if unknown:
+        raise ValueError(f"the claims hold verdicts {unknown} that are no status; allowed: {list(SHORT)}")
 
 
 def summary(df: pd.DataFrame) -> pd.DataFrame:
@@ -183,8 +189,11 @@ def summary_lines(df: pd.DataFrame) -> list[str]:
 
 
 def markdown(df: pd.DataFrame) -> str:
-    """``df`` as a GitHub markdown table (pipes in cells escaped); no rows, the header alone."""
-    cells = lambda row: "| " + " | ".join(str(x).replace("|", "\\|") for x in row) + " |"
+    """``df`` as a GitHub markdown table (pipes in cells escaped, line breaks as spaces); no rows,
+    the header alone."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"markdown takes a DataFrame, got {type(df).__name__}")
+    cells = lambda row: "| " + " | ".join(" ".join(str(x).split()).replace("|", "\\|") for x in row) + " |"
     return "\n".join([cells(df.columns), cells(["---"] * len(df.columns)), *map(cells, df.itertuples(index=False))])
 
 
@@ -199,7 +208,7 @@ SECTIONS = {"6.1": "the mazes", "6.2": "SMAC on SMAX", "6.3": "Google Research F
 def conclusion(df: pd.DataFrame) -> list[str]:
     """What the reproduction found, one paragraph per section of ``glance``: each status with
     the claims that have it, in the table's words."""
-    _check_glance(df)
+    _check_glance(df, ("section", "claim", "verdict", "budget"))
     out = []
     for section, part in df.groupby("section", sort=False):
         n = int(summary(part).to_numpy().sum())

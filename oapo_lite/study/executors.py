@@ -104,9 +104,17 @@ def in_processes(fn, jobs, workers: int):
 
 
 def _start_worker(context):
+    """A worker process and this end of its pipe. The worker is born with Ctrl-C blocked (a
+    blocked signal stays blocked across the spawn), so that Ctrl-C at a terminal cannot break it
+    while it imports, before it leaves the terminal's process group; a Ctrl-C meanwhile reaches
+    this process once the block is lifted."""
     ours, theirs = context.Pipe()
     process = context.Process(target=_serve, args=(theirs, os.getpid()), name="oapo-worker")
-    process.start()
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        process.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
     theirs.close()  # only the worker holds its end: its death is then an end of file here
     return process, ours
 
@@ -119,6 +127,7 @@ def _serve(conn, parent: int) -> None:
     worker with everything it started; and it dies with the driver."""
     os.setpgid(0, 0)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked since its birth (``_start_worker``)
     die_with_parent(parent)
     from tqdm import tqdm
 
@@ -171,9 +180,17 @@ def die_with_parent(parent: int) -> None:
 
 
 def check_address(address: str | None) -> None:
-    if address is None or address == "auto" or re.fullmatch(r"(ray://)?[\w.\-]+:\d+", address):
+    """A Ray address: auto, HOST:PORT or ray://HOST:PORT, with a port in 1..65535 and, for a
+    numeric host, four numbers in 0..255 (Ray retries an impossible address for minutes)."""
+    if address is None or address == "auto":
         return
-    raise ValueError(f"Ray address {address!r} is invalid; allowed: auto, HOST:PORT or ray://HOST:PORT")
+    match = re.fullmatch(r"(?:ray://)?([\w.\-]+):(\d+)", address)
+    numeric = match and re.fullmatch(r"[\d.]+", match.group(1))
+    if match and 1 <= int(match.group(2)) <= 65535 and (not numeric or (
+            len(parts := match.group(1).split(".")) == 4 and all(p and int(p) <= 255 for p in parts))):
+        return
+    raise ValueError(f"Ray address {address!r} is invalid; allowed: auto, HOST:PORT or ray://HOST:PORT (port 1-65535, "
+                     "a numeric host as four numbers 0-255)")
 
 
 def connect(address: str | None, attempts: int = 3, **init_kwargs):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from oapo_lite.algorithms import ALGOS
 from oapo_lite.cli import output_folder
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
@@ -84,6 +85,8 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
     then trains the run again). A file read before and unchanged since is not read again."""
     path = run_path(cfg, budget)
     stat = path.stat()  # FileNotFoundError: not on disk
+    if path.is_dir():  # not a damaged result: something the cache must not overwrite
+        raise ValueError(f"run file {path} is a folder; delete or move it")
     version = (path, stat.st_mtime_ns, stat.st_size)  # the path names the config
     if version not in _CHECKED:
         if len(_CHECKED) > 4096:
@@ -108,9 +111,19 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
         raise DamagedFile(f"run file {path} lacks the columns {[c for c in needed if c not in df.columns]}; {RETRAIN}")
     steps = pd.to_numeric(df["step"], errors="coerce")
     if len(df) != len(cfg.eval_steps) or steps.isna().any() or list(steps) != cfg.eval_steps:
-        raise DamagedFile(f"run file {path} is not the whole run: its steps are not the {len(cfg.eval_steps)} "
-                          f"evaluation steps of its config ({cfg.eval_steps[0]} to {cfg.eval_steps[-1]}), found "
-                          f"{len(df)} rows; {RETRAIN}")
+        wrong = next((i for i, (a, b) in enumerate(zip(steps, cfg.eval_steps)) if a != b), min(len(df), len(steps)))
+        at = (f"its step column at row {wrong + 1} holds {df['step'].iloc[wrong]!r} where the config evaluates at "
+              f"{cfg.eval_steps[wrong]}" if wrong < min(len(df), len(cfg.eval_steps)) else
+              f"it has {len(df)} rows where the config has {len(cfg.eval_steps)} evaluations")
+        raise DamagedFile(f"run file {path} is not the whole run: {at} (its evaluation steps run from "
+                          f"{cfg.eval_steps[0]} to {cfg.eval_steps[-1]} every {cfg.eval_every * cfg.iteration_steps}); "
+                          f"{RETRAIN}")
+    missing = [c for c in FAMILY_COLUMNS[ALGOS[cfg.algo].a2c] if c not in df.columns]
+    if missing:  # what every run of its algorithm's family writes
+        raise DamagedFile(f"run file {path} lacks the columns {missing} that every {cfg.algo} run writes; {RETRAIN}")
+    if df["git_rev"].isna().any():
+        raise DamagedFile(f"run file {path} has a row without its git revision (row "
+                          f"{int(np.flatnonzero(df['git_rev'].isna())[0]) + 1}); {RETRAIN}")
     differ = _config_differs(df, cfg)
     if differ:
         raise DamagedFile(f"run file {path} holds another run's rows: its {differ} column does not say "
@@ -118,7 +131,7 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
     try:
         df = read_arrays(df, MATRICES)
     except ValueError as err:  # not JSON
-        raise DamagedFile(f"run file {path} has a matrix that is not JSON ({err}); {RETRAIN}") from None
+        raise DamagedFile(f"run file {path} is damaged: {err}; {RETRAIN}") from None
     try:
         _check_iterations(df, cfg)
         results.check(df, cfg.flat())
@@ -131,10 +144,18 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
 MATRICES = ("kl_matrix", "reuse_matrix", "agreement", "kl_nearest")  # per-iteration arrays, JSON in the file
 
 
+# the columns every run of a family writes (the PPO / TRPO family's, the A2C family's); the others
+# came later, so an older run file may lack them
+FAMILY_COLUMNS = {False: ("objective", "value_loss", "kl_matrix", "reuse_matrix"),
+                  True: ("policy_loss", "value_loss", "entropy")}
+
+
 def _check_iterations(df: pd.DataFrame, cfg: TrainConfig) -> None:
     """Every row's iteration is its step's (``results.check`` reads it)."""
-    for i, (it, step) in enumerate(zip(df["iteration"], df["step"])):
-        if it * cfg.iteration_steps != step:
+    for i, (it, step) in enumerate(zip(pd.to_numeric(df["iteration"], errors="coerce"), df["step"])):
+        if not it * cfg.iteration_steps == step:  # NaN (text) too
+            it = df["iteration"].iloc[i]
+            it = it.item() if isinstance(it, np.generic) else it
             raise results.BadRows(f"its iteration column at row {i + 1} (step {step}) holds {it!r}; allowed: step / "
                                   f"(n_envs x rollout length) = {step / cfg.iteration_steps:g}")
 

@@ -14,7 +14,10 @@ YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arri
 # colours, so no algorithm is red, black or blue, and Fig. 1's reused / omitted are neither.
 ALGO_COLORS = {"oappo": "#2ca02c", "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b",
                "hatrpo": "#e377c2", "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
-               "oappo adaptive": "#145214", "oappo warm-up 10": "#98df8a"}
+               "oappo adaptive": "#145214", "oappo warm-up 10": "#98df8a",
+               # the selection ablation: gated reuse is OAPPO proper; always-on and within-kind its foils
+               "oappo gated": "#2ca02c", "oappo always": "#d4a017", "oappo type gated": "#1b7f79",
+               "oappo type own kind": "#7fb8b3"}
 # Fig. 5b's reuse schemes: no reuse is HAPPO's scheme and everyone-shares MAPPO's, so they echo them
 SCHEME_COLORS = {"NR": ALGO_COLORS["happo"], "AR": ALGO_COLORS["mappo"], "UR": "#e377c2", "RR": "#17becf"}
 AGENT_COLORS = {"red": "#d62728", "black": "#000000", "blue": "#1f77b4"}
@@ -47,16 +50,29 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
     and optimal seeds have a mean that describes no run and a band that leaves the possible
     range. The title gets a line saying so. ``colors``: label -> colour, where a figure needs
     its own (else ``color_of``)."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     if df.empty:  # e.g. load_figure(..., skip_missing=True) with nothing on disk
         return _no_runs(ax, title)
+    lacking = [c for c in ("label", "seed", "step", y) if c not in df]
+    if lacking:
+        raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step and {y!r}")
+    if not pd.api.types.is_numeric_dtype(df[y]):
+        raise ValueError(f"the runs' {y!r} column holds text (e.g. {df[y].iloc[0]!r}); allowed: numbers")
+    twice = df[df.duplicated(["label", "seed", "step"])]
+    if len(twice):
+        raise ValueError(f"curve {twice['label'].iloc[0]!r} has two rows for seed {twice['seed'].iloc[0]} at step "
+                         f"{twice['step'].iloc[0]}; a run has one row per evaluation")
     order = order if order is not None else list(dict.fromkeys(df["label"]))
     unknown = [label for label in order if label not in set(df["label"])]
     if unknown:
         raise ValueError(f"no runs of the curves {unknown} to draw; the data's curves are {list(dict.fromkeys(df['label']))}")
     seeds_of = {}
     for label in order:  # the bold medians first, every curve's seeds on top: no seed hides under another curve
-        runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values=y)
+        runs = df[df["label"] == label].pivot(index="step", columns="seed", values=y)
+        if runs.isna().all().all():
+            raise ValueError(f"curve {label!r} has no value of {y!r} to draw (every evaluation is empty)")
         color = (colors or {}).get(label) or color_of(label, order)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
         line, = ax.plot(runs.index, median, lw=2.2, label=str(label), color=color, zorder=2)
@@ -119,6 +135,49 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
                     capsize=3, label=str(label), color=(colors or {}).get(label) or color_of(label))
     ax.set_xticks(ticks, [f"{x[name]:g}" if isinstance(x[name], float) else str(x[name]) for name in order])
     ax.set(title=title, ylabel=ylabel)
+    return ax
+
+
+def across_shares(df: pd.DataFrame, order=None, ax=None, title=None):
+    """Beside a figure's curves: per curve, the median over seeds of ``across_share`` (M's weight
+    on the seats of other networks: the reuse Eq. 9's gate decided) against env steps. A curve
+    that never reuses across networks lies at 0."""
+    ax = ax or plt.subplots(figsize=(6, 3))[1]
+    df = df[df["across_share"].notna()] if "across_share" in df else df.iloc[:0]
+    if df.empty:
+        return _no_runs(ax, title)
+    order = order if order is not None else list(dict.fromkeys(df["label"]))
+    for label in order:
+        runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values="across_share")
+        ax.plot(runs.index, np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower"), lw=2, label=str(label),
+                color=color_of(label, order))
+    ax.xaxis.set_major_formatter(STEPS)
+    ax.set(xlabel="environment steps", ylabel="weight on other\nnetworks' seats", ylim=(-0.02, None),
+           title=title or "reuse across networks (median over seeds)")
+    return ax
+
+
+def gate_strips(kl: pd.DataFrame, owner: list[int], sigma: float, names, ax=None, title=None):
+    """When Eq. 9's gate was open, per ordered pair of seats on different networks (learner <-
+    source): one strip over the evaluated env steps, its shade the share of seeds whose K[i, j]
+    was within ``sigma``. ``kl``: rows with ``seed``, ``step`` and ``kl_matrix`` (one curve)."""
+    ax = ax or plt.subplots(figsize=(7, 3))[1]
+    kl = kl[kl["kl_matrix"].notna()]
+    pairs = [(i, j) for i in range(len(owner)) for j in range(len(owner)) if owner[i] != owner[j]]
+    if kl.empty or not pairs:
+        return _no_runs(ax, title)
+    steps = np.sort(kl["step"].unique())
+    open_share = np.zeros((len(pairs), len(steps)))
+    for c, step in enumerate(steps):
+        ks = np.stack(kl.loc[kl["step"] == step, "kl_matrix"].to_list())  # (seeds, n, n)
+        open_share[:, c] = [(ks[:, i, j] <= sigma).mean() for i, j in pairs]
+    width = steps[1] - steps[0] if len(steps) > 1 else 1.0
+    ax.imshow(open_share, aspect="auto", cmap="Greens", vmin=0, vmax=1, interpolation="nearest",
+              extent=(steps[0] - width / 2, steps[-1] + width / 2, len(pairs) - 0.5, -0.5))
+    ax.set_yticks(range(len(pairs)), [f"{names[i]} <- {names[j]}" for i, j in pairs], fontsize=7)
+    ax.xaxis.set_major_formatter(STEPS)
+    ax.grid(False)
+    ax.set(xlabel="environment steps", title=title or f"gate open (K <= sigma = {sigma:g}): share of seeds, dark = all")
     return ax
 
 

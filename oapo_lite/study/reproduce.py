@@ -190,10 +190,6 @@ def _cluster_cpus(address: str | None) -> int:
             ray.shutdown()
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def command_line() -> cli.Parser:
     """The command line of ``reproduce``."""
     parser = cli.Parser(prog="python -m oapo_lite reproduce", description=__doc__)
@@ -258,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(err))
 
     start = time.perf_counter()
-    signal.signal(signal.SIGTERM, _interrupt)  # a SIGTERM stops the work as Ctrl-C does
+    signal.signal(signal.SIGTERM, cli.interrupt)  # a SIGTERM stops the work as Ctrl-C does
     try:
         runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
                                    progress="lines" if args.check else True, executor=args.executor,

@@ -26,6 +26,7 @@ from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
 from oapo_lite.reuse import peer_share
+from oapo_lite.store import read_arrays
 from oapo_lite.study.statistics import Interval, bootstrap_interval, iqm, probability_of_improvement
 
 THRESHOLD = 0.95
@@ -88,6 +89,10 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     ``check`` names beside its verdict."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
+    if not (isinstance(threshold, (int, float)) and not np.isnan(threshold)):
+        raise ValueError(f"threshold = {threshold!r} is invalid; allowed: a number (inf: never reached)")
+    if not (isinstance(tail, (int, float)) and 0 < tail <= 1):
+        raise ValueError(f"tail = {tail!r} is invalid; allowed: a share of the evaluation points in (0, 1]")
     rows = []
     if df.empty:
         df = pd.DataFrame(columns=["label", "seed", "step", y])
@@ -95,6 +100,8 @@ def per_run(df: pd.DataFrame, threshold: float = THRESHOLD, tail: float = 0.1, y
     if lacking:
         raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step and {y!r} "
                          "(e.g. experiments.load_figure's rows)")
+    if len(df) and not pd.api.types.is_numeric_dtype(df[y]):
+        raise ValueError(f"the runs' {y!r} column holds text (e.g. {df[y].iloc[0]!r}); allowed: numbers")
     twice = df[df.duplicated(["label", "seed", "step"])]
     if len(twice):
         first = twice.iloc[0]
@@ -201,6 +208,13 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     parts = []
     if "reuse_matrix" not in df:  # no run recorded M (or no run at all)
         return pd.DataFrame()
+    lacking = [c for c in ("env", "label", "seed", "step", y) if c not in df]
+    if lacking:
+        raise ValueError(f"the runs lack the columns {lacking} (experiments.load_figure's rows have them)")
+    df = read_arrays(df, ("reuse_matrix",))  # JSON text, as a CSV holds it, or arrays already
+    unknown = sorted({(e, label) for e, label in zip(df["env"], df["label"])} - set(owners))
+    if unknown:
+        raise ValueError(f"owners names no network of each seat for {unknown} (experiments.seat_networks gives them)")
     for env, part in df[df["reuse_matrix"].notna()].groupby("env", sort=False):
         final = per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
         across = pd.Series([peer_share(m, owners[env, label]) for m, label in zip(part["reuse_matrix"], part["label"])],
@@ -266,8 +280,12 @@ def paired_difference(df: pd.DataFrame, a, b, y: str, tail: float = 0.2) -> tupl
     if absent:
         known = list(dict.fromkeys(df["label"])) if "label" in df else []
         raise ValueError(f"no runs labelled {absent} to pair; the runs' labels are {known}")
+    if a == b:
+        raise ValueError(f"a and b are both {a!r}; a pair compares two curves")
     runs = per_run(df[df["label"].isin([a, b])], tail=tail, y=y).pivot(index="seed", columns="label", values="final")
     runs = runs.reindex(columns=[a, b]).dropna()
+    if runs.empty:
+        raise ValueError(f"no seed has runs of both {a!r} and {b!r}, so there is no pair to compare")
     runs["difference"] = runs[a] - runs[b]
     return runs, bootstrap_interval(np.mean, runs["difference"].to_numpy())
 
@@ -393,8 +411,13 @@ def faster(ev: Evidence, a, b, claim: str) -> Verdict:
     there counts at its last step, so it ranks behind every seed that did: whether ``a`` gets
     there as often is ``reliable``'s question, not this one's."""
     reach = ev.metric.reach.format(ev.threshold)
-    return _pairwise(ev, a, b, "steps", claim,
-                     evidence=f"steps to {reach}, IQM [95% CI] over seeds: {_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}")
+    verdict = _pairwise(ev, a, b, "steps", claim,
+                        evidence=f"steps to {reach}, IQM [95% CI] over seeds: {_fmt_steps(ev, a)} vs {_fmt_steps(ev, b)}")
+    never = [x for x in (a, b) if not ev.summary.loc[x, "reached"]]
+    if never:  # a curve that never got there ranks at the budget's end: say so beside the verdict
+        return replace(verdict, reason=f"{verdict.reason}; {' and '.join(map(str, never))} did not reach {reach} in "
+                                       "the budget (counted at its end)")
+    return verdict
 
 
 def _share_difference(x, y, axis: int = -1):
@@ -434,10 +457,19 @@ def paired_higher(ev: Evidence, a, b, claim: str) -> Verdict:
 
 def stabler(ev: Evidence, a, b, claim: str) -> Verdict:
     """Claim: ``a`` improves more steadily than ``b``: a smaller largest drop of its curve
-    below an earlier peak."""
-    return _pairwise(ev, a, b, "drawdown", claim,
-                     evidence=f"largest drop below an earlier peak, IQM [95% CI]: {a} {ev.level(a, 'drawdown').fmt()} "
-                              f"vs {b} {ev.level(b, 'drawdown').fmt()}")
+    below an earlier peak, over the seeds that learned (ended above their start and the metric's
+    floor: a seed that never moved has no drop and would count as the steadiest)."""
+    runs = ev.runs[(ev.runs["final"] > ev.runs["initial"]) & (ev.runs["final"] > ev.metric.floor)]
+    drops = {x: runs.loc[runs["label"] == x, "drawdown"].to_numpy(float) for x in (a, b)}
+    few = [f"{x} ({len(d)} of {int(ev.summary.loc[x, 'seeds'])})" for x, d in drops.items() if len(d) < 2]
+    if few:
+        return Verdict(claim, NOT_TESTABLE, "", "", f"fewer than 2 seeds that learned: {', '.join(few)}")
+    p = bootstrap_interval(probability_of_improvement, -drops[a], -drops[b])
+    estimate = f"P({a} steadier) {p.fmt()}"
+    status = _side(p, 0.5, True)
+    fmt = {x: f"{bootstrap_interval(iqm, d).fmt()} over {len(d)} seeds that learned" for x, d in drops.items()}
+    return Verdict(claim, status, f"largest drop below an earlier peak, IQM [95% CI]: {a} {fmt[a]} vs {b} {fmt[b]}; "
+                                  f"{estimate}.", estimate, _reason(status, estimate, "above 0.5", 0.5))
 
 
 def better(ev: Evidence, a, b, claim: str) -> Verdict:
