@@ -878,9 +878,9 @@ def test_the_tables_take_no_rows_and_name_what_they_lack():
     from oapo_lite.study import claims
 
     none = pd.DataFrame(columns=claims.GLANCE_COLUMNS)
-    assert claims.summary(none).empty and claims.summary_lines(none) == [] and claims.conclusion(none) == []
+    assert claims.summary(none).empty and claims.summary_lines(none) == []
     assert claims.readme_markdown(none).endswith("| --- | --- | --- | --- | --- | --- | --- | --- |")
-    for table in (claims.summary, claims.summary_lines, claims.conclusion, claims.readme_markdown):
+    for table in (claims.summary, claims.summary_lines, claims.readme_markdown):
         with pytest.raises(ValueError, match=r"the claims lack the columns \['section', 'claim', 'verdict'"):
             table(pd.DataFrame())
     assert tables.reuse_table(pd.DataFrame(), "eval_success", {}).empty
@@ -956,8 +956,6 @@ def test_a_checkpoint_missing_or_garbling_an_entry_is_damaged_named_and_trained_
     (lambda: claims_module().summary(None), "must be glance()'s DataFrame, got NoneType"),
     (lambda: claims_module().summary(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["held?"]})),
      "verdicts ['held?'] that are no status"),
-    (lambda: claims_module().conclusion(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["reproduced"]})),
-     "lack the columns ['budget']"),
     (lambda: claims_module().markdown([1]), "markdown takes a DataFrame, got list"),
     (lambda: plotting.learning_curves([1]), "must be a pandas DataFrame"),
     (lambda: plotting.learning_curves(_two_curves().drop(columns="seed")), "lack the columns ['seed']"),
@@ -1000,4 +998,6 @@ def test_an_interrupt_while_the_command_still_imports_is_one_line_and_130(tmp_pa
         _, err = driver.communicate(timeout=60)
         if driver.returncode == 0:  # finished before the signal (a fast machine): nothing to show
             continue
+        if driver.returncode == -sig and not err:  # a loaded machine: the signal came before the interpreter ran
+            continue                               # any of the package, which no Python program can handle
         assert driver.returncode == 130 and "Traceback" not in err and "run the same command again" in err, err

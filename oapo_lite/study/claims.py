@@ -196,27 +196,6 @@ def readme_block(path: Path = README) -> str:
     return readme.block(BEGIN, END, path)
 
 
-SECTIONS = {"6.1": "the mazes", "6.2": "SMAC on SMAX", "6.3": "Google Research Football", "App. A": "multi-agent MuJoCo"}
-
-
-def conclusion(df: pd.DataFrame) -> list[str]:
-    """What the reproduction found, one paragraph per section of ``glance``: each status with
-    the claims that have it, in the table's words."""
-    _check_glance(df, ("section", "claim", "verdict", "budget"))
-    out = []
-    for section, part in df.groupby("section", sort=False):
-        n = int(summary(part).to_numpy().sum())
-        budgets = sorted(set(part.loc[part["verdict"] != verdicts.NOT_RUN, "budget"]))
-        lines = [f"Section {section} ({SECTIONS.get(section, section)}), {n} claims"
-                 + (f", at {'; '.join(budgets)}" if len(budgets) == 1 else "") + ":"]
-        for status in verdicts.STATUSES:
-            these = part.loc[part["verdict"] == status, "claim"]
-            if len(these):
-                lines.append(f"{status}: {'; '.join(these)}.")
-        out.append(" ".join(lines))
-    return out
-
-
 def readme_markdown(df: pd.DataFrame) -> str:
     """What the README carries between its markers: the summary, the statuses, the table."""
     statuses = "\n".join(f"- *{status}*: {meaning}." for status, meaning in verdicts.STATUSES.items())
@@ -231,4 +210,5 @@ def write_readme(path: Path = README) -> None:
 
 if __name__ == "__main__":
     write_readme()
-    print(f"wrote the claims table ({len(glance())} claims) into {README}", file=sys.stderr)
+    print(f"wrote the claims table ({len(glance())} claims) into {README}; `python -m oapo_lite.study.conclusion` "
+          "writes it with the README's opening", file=sys.stderr)

@@ -21,9 +21,8 @@ import pandas as pd
 
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
-from oapo_lite.study import experiments, figures
+from oapo_lite.study import experiments, figures, verdicts
 
-# (env, reading) -> the figure and curve label of the committed runs the rule reads
 # (env, reading) -> the figure, curve label and seeds of the OAPPO runs the rule reads
 RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:6h_vs_8z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
@@ -64,3 +63,31 @@ def gate_use(df: pd.DataFrame, sigma_of: dict) -> pd.DataFrame:
                      "shut": float(np.mean(k > sigma)) if len(k) else np.nan,
                      "across_share": float(part["across_share"].mean()) if "across_share" in part else np.nan})
     return pd.DataFrame(rows)
+
+
+def rule_sigma(figure: str) -> dict:
+    """(env, curve label) -> the rule's sigma for each reusing curve of a selection figure: the
+    gated curve's own, and for the always-on curve the sigma its gate would have had."""
+    return {(kw["env"], label): figures.SELECTION_SIGMA[kw["env"], "type" if label.startswith("oappo type") else "agent"]
+            for label, kw in figures.get_figure(figure).curves if label != "happo"}
+
+
+def summary(df: pd.DataFrame, figure: str) -> pd.DataFrame:
+    """Per env and curve of a selection figure, in the figure's order: seeds, the final value by
+    the figure's metric (IQM over seeds, 95% interval), and from ``gate_use`` at the rule's sigma
+    the share of across-network pair-iterations with the gate open and M's weight across networks."""
+    fig = figures.get_figure(figure)
+    sigmas = rule_sigma(figure)
+    use = gate_use(df, sigmas).set_index(["env", "label"]) if len(df) else pd.DataFrame()
+    rows = []
+    for env, sub in df.groupby("env", sort=False) if len(df) else []:
+        ev = verdicts.Evidence(sub, metric=fig.metric)
+        for label in (c for c, kw in fig.curves if kw["env"] == env and c in ev.summary.index):
+            final = ev.level(label, "final")
+            rows.append({"env": env, "label": label, "seeds": int(ev.summary.loc[label, "seeds"]), "final": final.point,
+                         "final_low": final.low, "final_high": final.high, "sigma": sigmas.get((env, label), np.nan),
+                         # no reuse: no gate to be open
+                         "open": use.loc[(env, label), "open"] if (env, label) in sigmas else np.nan,
+                         "across_share": use.loc[(env, label), "across_share"]})
+    return pd.DataFrame(rows, columns=["env", "label", "seeds", "final", "final_low", "final_high", "sigma", "open",
+                                       "across_share"])

@@ -80,11 +80,11 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     return pd.concat(parts) if parts else pd.DataFrame()
 
 
-def readings_table(figure: str, budget: str, y: str) -> pd.DataFrame:
+def readings_table(figure: str, budget: str, y: str, tail: float = 0.2) -> pd.DataFrame:
     """``reuse_table`` of a readings figure's runs on disk at ``budget`` (empty where it has none),
     each curve's seats mapped to their networks by ``seat_networks``."""
     runs = experiments.load_figure(figure, budget, skip_missing=True)
-    return pd.DataFrame() if runs.empty else reuse_table(runs, y, seat_networks(figure, budget))
+    return pd.DataFrame() if runs.empty else reuse_table(runs, y, seat_networks(figure, budget), tail)
 
 
 def sweep_table(df: pd.DataFrame, family: dict, metric: verdicts.Metric, tie: float = 0.02) -> pd.DataFrame:

@@ -503,7 +503,7 @@ def reuse_gap(ev: Evidence, labels) -> tuple[str, str] | None:
         return NOT_REUSE, f"{a}'s runs hold no reuse matrix, so whether it reused is unknown"
     last = ("no seed ever gave another network's seats weight" if np.isnan(s["last_reuse_step"])
             else f"the gate last opened across networks at {s['last_reuse_step']:,.0f} steps")
-    gap = (f"{last}; {a} reused across networks at {s['reusing']:.0%} of its evaluated iterations while it learned "
+    gap = (f"{last}; {a} reused across networks at {s['reusing']:.1%} of its evaluated iterations while it learned "
            f"(mean over seeds), below {REUSE_PART:.0%}")
     if ev.sharing.get(a):
         return SHARING, f"{gap}: its seats share networks, so the claim tests parameter sharing"

@@ -419,7 +419,7 @@ def test_a_claim_about_oappo_is_no_test_of_reuse_when_its_gate_closed_early():
     verdict = out["OAPPO converges faster than HAPPO"]
     assert verdict.status == v.NOT_REUSE
     assert verdict.reason.startswith("the gate last opened across networks at 5,000 steps; oappo reused across networks "
-                                     "at 18% of its evaluated iterations while it learned (mean over seeds), below 25%; "
+                                     "at 18.2% of its evaluated iterations while it learned (mean over seeds), below 25%; "
                                      "by the interval alone reproduced: P(oappo faster) 1.000")  # beside the status
     assert verdict.estimate.startswith("P(oappo faster) 1.000")  # the interval stays as evidence
     assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
@@ -440,14 +440,14 @@ def test_reuse_is_counted_while_the_curve_learns_and_at_least_a_quarter_is_enoug
     after = v.Evidence(with_reuse(base, {"oappo": lambda s: s > 50_000}))
     assert after.summary.loc["oappo", "reusing"] == 0.0
     assert after.summary.loc["oappo", "last_reuse_step"] == 100_000
-    assert "reused across networks at 0% of its evaluated iterations" in v.reuse_gap(after, ("oappo", "happo"))[1]
+    assert "reused across networks at 0.0% of its evaluated iterations" in v.reuse_gap(after, ("oappo", "happo"))[1]
     # the boundary: 3 of 11 evaluations (27%) is a test, 2 of 11 (18%) is not
     assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 10_000})), ("oappo", "happo")) is None
     assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 5_000})), ("oappo", "happo"))
     # never reused at all; no reuse matrix on record
     never = v.Evidence(with_reuse(base, {}))
     assert v.reuse_gap(never, ("oappo", "happo"))[1].startswith("no seed ever gave another network's seats weight; "
-                                                                "oappo reused across networks at 0%")
+                                                                "oappo reused across networks at 0.0%")
     unknown = v.Evidence(base.assign(algo=base["label"]))
     assert v.reuse_gap(unknown, ("oappo", "happo")) == (v.NOT_REUSE, "oappo's runs hold no reuse matrix, so whether "
                                                                       "it reused is unknown")

@@ -35,14 +35,17 @@ SELECTION_SIGMA = {(HALFCHEETAH, "agent"): 0.047}
 # the ablation's learner: the one ``fig_mamujoco_normalize``'s rule chose
 SELECTION_LEARNER = dict(FIGA_CURVES["happo"], normalize=True)
 
+# HARL's MaMuJoCo scale: App. A's ``paper`` budget, and the reference its ``cpu`` budgets are a share of
+HARL_SCALE = At(steps=10_000_000, eval_every=25, eval_episodes=10,
+                config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10))
+
 FIGURES = (
     # App. A's own settings are not public; ``paper`` is HARL's MaMuJoCo scale (10M steps).
     Figure("figA_mamujoco", tuple(FIGA_CURVES.items()), common=dict(env=HALFCHEETAH, ppo_epochs=15),
            runs_at=ENGINE_BUDGETS, budgets={
                "smoke": MAMUJOCO_SMOKE,
                "cpu": APPA_CPU,
-               "paper": At(steps=10_000_000, eval_every=25, eval_episodes=10,
-                           config=dict(n_envs=10, rollout_len=400, max_steps=1000, checkpoint_every=10)),
+               "paper": HARL_SCALE,
            }, metric=RETURN, claims=(
                # on homogeneous agents, reusing others' experience as it is (SEAC's importance-weighted
                # reuse; MAPPO's one network on everyone's data) ends lower than using one's own
@@ -58,7 +61,8 @@ FIGURES = (
     Figure("fig_selection_mamujoco", selection_curves(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
                                                       SELECTION_LEARNER),
            common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
-               "smoke": replace(MAMUJOCO_SMOKE, seeds=(10,)), "cpu": replace(HALFCHEETAH_1M, seeds=SELECTION_SEEDS)},
+               "smoke": replace(MAMUJOCO_SMOKE, seeds=(10,)), "cpu": replace(HALFCHEETAH_1M, seeds=SELECTION_SEEDS),
+               "paper": HARL_SCALE},
            metric=RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
                                                         name="HalfCheetah 2x3")),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),

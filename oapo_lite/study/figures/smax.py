@@ -97,6 +97,10 @@ SELECTION_SIGMA = {("smax:2s3z", "agent"): 0.046, ("smax:6h_vs_8z", "agent"): 0.
 
 
 READING_MAPS = ("smax:2s3z", "smax:6h_vs_8z")
+# HARL's steps per map: Fig. 4's ``paper`` budget, and the reference every SMAX budget is a share of
+HARL_STEPS = At(eval_episodes=64, eval_every=25, envs={
+    "smax:3m": At(steps=2_000_000), "smax:2s3z": At(steps=5_000_000), "smax:6h_vs_8z": At(steps=40_000_000),
+    "smax:3s5z_vs_3s6z": At(steps=20_000_000), "smax:MMM2_like_7m2M_vs_8m3M": At(steps=20_000_000)})
 SMAX_SWEEP = At(seeds=(0, 1, 2), steps=500_000, eval_every=10, eval_episodes=64)
 
 FIGURES = (
@@ -110,10 +114,7 @@ FIGURES = (
                                                  "smax:2s3z": At(steps=1_000_000, eval_every=10),
                                                  "smax:6h_vs_8z": At(steps=1_000_000, eval_every=10),
                                                  "smax:3s5z_vs_3s6z": At(steps=3_000_000, eval_every=40, seeds=(0, 1, 2))}),
-               "paper": At(eval_episodes=64, eval_every=25, envs={
-                   "smax:3m": At(steps=2_000_000), "smax:2s3z": At(steps=5_000_000),
-                   "smax:6h_vs_8z": At(steps=40_000_000), "smax:3s5z_vs_3s6z": At(steps=20_000_000),
-                   "smax:MMM2_like_7m2M_vs_8m3M": At(steps=20_000_000)}),
+               "paper": HARL_STEPS,
            }, metric=WIN_RATE, claims=tuple(c for m in FIG4_MAPS for c in _smax_claims(m)), claims_per_env="smax:",
            section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # per map, no reuse, a net per agent reusing always and through the gate, and on 2s3z a net
@@ -123,7 +124,8 @@ FIGURES = (
         tuned("oappo type") if env.removeprefix("smax:") in SMAX_HETEROGENEOUS else None)),
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("smoke", "cpu"), budgets={
                "smoke": At(steps=6_400, eval_every=1, eval_episodes=8, seeds=(10,)),
-               "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64)},
+               "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64),
+               "paper": HARL_STEPS},
            metric=WIN_RATE, claims=tuple(c for env in SELECTION_SMAX for c in selection_claims(env, sigma_on(SELECTION_SIGMA, env), "smax:")),
            claims_per_env="smax:", section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # at the config of Fig. 4's committed runs, so HAPPO, MAPPO and OAPPO (per agent, max) there
