@@ -284,7 +284,6 @@ def update_critic(critic: Critic, opt: torch.optim.Optimizer, value_norm: ValueN
     return loss.item()
 
 
-
 class PPOFamilyLearner:
     """``learner.Learner`` for OAPPO, OATRPO, HAPPO, HATRPO, MAPPO and IPPO: ``learn`` is one
     iteration's update (Algorithm 1 lines 4-9, then the critic); ``owner[k]`` is the net of seat k.

@@ -23,7 +23,6 @@ def make_env(cfg: TrainConfig, n_envs: int, seed: int) -> VecEnv:
     return env_registry.make_vec(cfg.env, n_envs, seed, cfg.max_steps)
 
 
-
 def _per_seat(x: np.ndarray) -> np.ndarray:
     """(T, n, N, ...) rollout buffer -> (n, T * N, ...): the batch's one layout, seat-major, in
     which sample b of a seat is step t = b // N of env copy b % N."""
@@ -186,7 +185,6 @@ def collect(env: VecEnv, step, actors: Actors, owner: list[int], length: int, ge
                     active=None if active.all() else torch.from_numpy(_per_seat(active)),
                     next_obs=torch.from_numpy(step.obs.copy()), episode_returns=returns, seconds=seconds)
     return batch, step
-
 
 
 def episode_scores(actors: Actors, owner: list[int], env: VecEnv, gen: torch.Generator, max_steps: int) -> tuple[float, float]:

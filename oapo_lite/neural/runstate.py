@@ -53,8 +53,6 @@ def git_revision() -> str:
         return "unknown"
 
 
-
-
 @dataclass
 class RunState:
     """Everything a run carries from one iteration to the next. ``start`` builds it from a config
