@@ -1,19 +1,26 @@
-"""What the reproduction found, in sentences: every number in them is computed here from the
-committed runs (the claims table, the layout study, Fig. 4's runs, the selection ablation and the
-cost records), so the text changes when the data does. Notebook 00 prints ``findings``; the
-README opens with ``opening`` (``write_readme`` writes it with the claims table, a test compares them)."""
+"""What the reproduction found, in sentences: every number in them, and every verb that states an
+outcome, is computed here from the committed runs (the claims table, the layout study, Fig. 4's
+runs, the selection ablation and the cost records), so the text changes when the data does.
+Notebook 00 prints ``findings``; the README opens with ``opening`` (``write_readme`` writes it
+with the claims table, a test compares them)."""
 from __future__ import annotations
 
 import sys
 
 import pandas as pd
 
-from oapo_lite.study import claims, costs, experiments, layout_study, readme, selection, verdicts
-from oapo_lite.study.figures import get_figure, runs_of
+from oapo_lite.study import claims, costs, experiments, layout_study, readme, verdicts
+from oapo_lite.study.figures import GRID, figure_runs, get_figure
 
 LAYOUT_BUDGET = "paper"  # the layout study's committed runs (5 seeds per layout and curve)
 SELECTION_FIGURES = ("fig_selection_smax", "fig_selection_mamujoco")
-UNRUN_FIGURES = ("fig6b", "fig4_smax")  # where the claims table has rows "not run"
+LEAN = ("oappo lambda=0.2", "oappo lambda=0.4")  # the readings that lean on the peer (lambda < 1/2)
+# the statuses under which an interval decided a claim (the others say why it could not)
+DECIDED = (verdicts.REPRODUCED, verdicts.WITHIN_NOISE, verdicts.NOT, verdicts.CONTRADICTED)
+# the selection ablation's claims, by the curves they compare
+SELECTION_TESTS = {("oappo gated", "happo"): "gated vs never", ("oappo gated", "oappo always"): "gated vs always",
+                   ("oappo always", "happo"): "always vs never",
+                   ("oappo type gated", "oappo type own type"): "across types vs within"}
 
 
 def _row(glance: pd.DataFrame, claim: str) -> pd.Series:
@@ -24,9 +31,11 @@ def _row(glance: pd.DataFrame, claim: str) -> pd.Series:
 
 
 def _estimate(row: pd.Series) -> str:
-    """The interval a row's reason leads with (its reading after "by the interval alone", if any)."""
-    why = row["why"].split(f"{verdicts.INTERVAL_ALONE} ")[-1]
-    return why.split(": ")[0] if ": " in why else why
+    """The interval a row's reason gives (after "by the interval alone <status>:", where there)."""
+    why = row["why"]
+    if verdicts.INTERVAL_ALONE in why:
+        why = why.split(f"{verdicts.INTERVAL_ALONE} ", 1)[1].split(": ", 1)[1]
+    return why.split(": ")[0]
 
 
 def mazes(glance: pd.DataFrame) -> dict:
@@ -39,148 +48,176 @@ def mazes(glance: pd.DataFrame) -> dict:
 
 
 def smax_sharing() -> pd.DataFrame:
-    """Per Fig. 4 map at ``cpu``: MAPPO's and HAPPO's final win rate (IQM) and P(MAPPO reaches a
-    50% win rate in fewer steps than HAPPO)."""
+    """Per Fig. 4 map at ``cpu``: the final win rate (IQM) of MAPPO, of HAPPO and of the best
+    OAPPO reading, and P(MAPPO reaches a 50% win rate in fewer steps than HAPPO)."""
     df = experiments.load_figure("fig4_smax", "cpu", skip_missing=True)
     rows = {}
     for env, runs in df.groupby("env", sort=False):
         ev = verdicts.Evidence(runs, metric=verdicts.WIN_RATE)
-        if {"mappo", "happo"} <= set(ev.summary.index):
+        readings = [a for a in ev.summary.index if str(a).startswith("oappo")]
+        if {"mappo", "happo"} <= set(ev.summary.index) and readings:
             rows[env.removeprefix("smax:")] = {"mappo": ev.level("mappo", "final").point,
                                                "happo": ev.level("happo", "final").point,
+                                               "best_oappo": max(ev.level(a, "final").point for a in readings),
                                                "p_mappo_faster": ev.improvement("mappo", "happo", "steps").point}
-    return pd.DataFrame.from_dict(rows, orient="index")
+    return pd.DataFrame.from_dict(rows, orient="index", columns=["mappo", "happo", "best_oappo", "p_mappo_faster"])
 
 
 def selection_results() -> dict[str, dict]:
-    """Per env of the selection ablation: seeds on disk (fewest of a curve), and the verdict of
-    each of its claims, keyed by the claim's test ("gated vs never", "gated vs always", ...)."""
+    """Per env of the selection ablation: each curve's seeds on disk and the seeds planned
+    (``seeds``, ``planned``), and the verdict of each of its claims by ``SELECTION_TESTS``."""
     out = {}
     for figure in SELECTION_FIGURES:
         fig = get_figure(figure)
         df = experiments.load_figure(figure, "cpu", skip_missing=True)
-        table = selection.summary(df, figure)
         for claim, v in zip(fig.claims, claims.judge(fig, df)):
             env = claim[0] if fig.claims_per_env else "HalfCheetah 2x3"
-            labels = claim[-2]
-            key = {("oappo gated", "happo"): "gated vs never", ("oappo gated", "oappo always"): "gated vs always",
-                   ("oappo always", "happo"): "always vs never",
-                   ("oappo type gated", "oappo type own type"): "across types vs within"}[tuple(labels)]
-            part = table[table["env"].str.contains(env.split()[0], regex=False)]
-            out.setdefault(env, {"seeds": int(part["seeds"].min()) if len(part) else 0})[key] = v
+            out.setdefault(env, {})[SELECTION_TESTS[tuple(claim[-2])]] = v
+        for env in dict.fromkeys(cfg.env for _, cfg in figure_runs(fig, "cpu")):
+            name = env.removeprefix(fig.claims_per_env) if fig.claims_per_env else "HalfCheetah 2x3"
+            labels = [label for label, kw in fig.curves if kw["env"] == env]
+            on_disk = df[df["env"] == env].groupby("label")["seed"].nunique() if len(df) else pd.Series(dtype=int)
+            out[name]["seeds"] = {label: int(on_disk.get(label, 0)) for label in labels}
+            out[name]["planned"] = len(fig.budget("cpu", env).seeds)
+            out[name]["steps"] = fig.budget("cpu", env).steps
     return out
+
+
+def outcome(sel: dict) -> tuple[list[str], list[str], list[str]]:
+    """From ``selection_results``: the envs where reuse (always or gated) ended above no reuse,
+    those where gated reuse ended above always-on (each with its paired interval above 0), and
+    those where an interval decided gated against always-on at all."""
+    def status(r, k):
+        return r[k].status if k in r else verdicts.NOT_RUN
+    helped = [e for e, r in sel.items() if verdicts.REPRODUCED in (status(r, "gated vs never"), status(r, "always vs never"))]
+    selected = [e for e, r in sel.items() if status(r, "gated vs always") == verdicts.REPRODUCED]
+    tested = [e for e, r in sel.items() if status(r, "gated vs always") in DECIDED]
+    return helped, selected, tested
 
 
 def smax_share() -> str:
     """Fig. 4's ``cpu`` steps as a share of HARL's, the smallest and largest over its maps."""
     fig = get_figure("fig4_smax")
     shares = [fig.budget("cpu", env).steps / fig.budget("paper", env).steps for env in fig.envs("cpu")]
-    return f"{100 * min(shares):.2g}-{100 * max(shares):.2g}%"
+    return f"{100 * min(shares):.3g}-{100 * max(shares):.3g}%"
 
 
-def grf_steps() -> int:
-    """The env steps of a GRF run at ``cpu``, the longest."""
-    return max(r.cfg.steps for r in runs_of("fig6b", "cpu"))
+def unrun(glance: pd.DataFrame) -> pd.DataFrame:
+    """The claims table's rows of envs with no run at ``cpu`` (one row per env)."""
+    return glance[glance["verdict"] == verdicts.NOT_RUN]
 
 
-def outcome(sel: dict) -> tuple[list[str], list[str], list[str]]:
-    """From ``selection_results``: the envs where reuse (always or gated) ended above no reuse,
-    those where gated reuse ended above always-on (each with its interval above 0), and those
-    where gated against always-on could be judged at all."""
-    def status(r, k):
-        return r[k].status if k in r else verdicts.NOT_RUN
-    helped = [e for e, r in sel.items() if verdicts.REPRODUCED in (status(r, "gated vs never"), status(r, "always vs never"))]
-    selected = [e for e, r in sel.items() if status(r, "gated vs always") == verdicts.REPRODUCED]
-    tested = [e for e, r in sel.items() if status(r, "gated vs always") not in (verdicts.NOT_TESTABLE, verdicts.NOT_RUN)]
-    return helped, selected, tested
+def _figure_of(row: pd.Series) -> str:
+    """The figure whose claims are about the env a claims-table row of an unrun env names."""
+    env = row["claim"].split(":")[0]
+    return next(f.id for f in GRID if f.claims_per_env and any(c[0] == env for c in f.claims))
 
 
-def unrun(glance: pd.DataFrame) -> list[tuple[str, str]]:
-    """The claims table's rows of envs with no run, (claim, budget) each."""
-    rows = glance[glance["verdict"] == verdicts.NOT_RUN]
-    return list(zip(rows["claim"], rows["budget"]))
+def _maze_paragraph(glance: pd.DataFrame, counts: pd.DataFrame) -> tuple[str, dict]:
+    m = mazes(glance)
+    below, faster = m["below"], m["faster"]
+    happo = int(below.loc["happo", "sum"])
+    lean = {c: int(below.loc[c, "sum"]) for c in LEAN if c in below.index}
+    rescued = below.loc["oappo", "sum"] < happo
+    trapped = [c for c, n in lean.items() if n > happo]
+    text = (f"On the mazes (Section 6.1, {int(counts.loc['6.1'].get(verdicts.REPRODUCED, 0))} claims reproduced, "
+            f"{int(counts.loc['6.1'].get(verdicts.CONTRADICTED, 0))} contradicted), \"OAPPO converges faster than HAPPO\" "
+            f"is {faster['verdict']} at {faster['budget'].split(';')[0]} ({_estimate(faster)}). On {m['layouts']} "
+            f"generated layouts OAPPO (lambda = 0.7) ended below 95% of the optimum on {below.loc['oappo', 'sum']} of "
+            f"{below.loc['oappo', 'size']} runs against HAPPO's {happo} of {below.loc['happo', 'size']}"
+            + (": reuse rescued HAPPO's exploration failures." if rescued else ": reuse did not lower HAPPO's failures.")
+            + " At " + ", at ".join(f"lambda = {c.split('=')[1]} it ended below 95% on {n} of {below.loc[c, 'size']}"
+                                    for c, n in lean.items())
+            + (f": leaning on the peer's experience (lambda < 1/2) trapped the agents more often than no reuse, "
+               "where the paper recommends lambda = 0.4." if trapped else "."))
+    return text, {"m": m, "happo": happo, "lean": lean, "rescued": rescued, "trapped": trapped}
 
 
 def findings(glance: pd.DataFrame | None = None) -> list[str]:
     """The conclusion, one paragraph per finding, every number from the data."""
     glance = claims.glance() if glance is None else glance
     counts = claims.summary(glance)
-    held = {s: int(counts.loc[s].get(verdicts.REPRODUCED, 0)) for s in counts.index}
-    against = {s: int(counts.loc[s].get(verdicts.CONTRADICTED, 0)) for s in counts.index}
-    m = mazes(glance)
-    below = m["below"]
-    lam = [c for c in ("oappo lambda=0.2", "oappo lambda=0.4") if c in below.index]
-    traps = ", ".join(f"{c.removeprefix('oappo ')} ended below 95% on {below.loc[c, 'sum']} of {below.loc[c, 'size']}"
-                      for c in lam)
-    out = [
-        "What the paper claims: agents that update one after another (HAPPO's scheme) and also learn from another "
-        "agent's experience while their policies are within KL sigma (Eq. 9) learn faster than agents that use only "
-        "their own experience, and avoid the local optima that full parameter sharing (MAPPO) falls into.",
-        f"On the mazes (Section 6.1, {held['6.1']} claims reproduced, {against['6.1']} contradicted): reuse at lambda = "
-        f"0.7 learned faster than HAPPO ({m['faster']['verdict']} at {m['faster']['budget'].split(';')[0]}: "
-        f"{_estimate(m['faster'])}), and on {m['layouts']} generated layouts it ended below 95% of the optimum on "
-        f"{below.loc['oappo', 'sum']} of {below.loc['oappo', 'size']} runs against HAPPO's {below.loc['happo', 'sum']} of "
-        f"{below.loc['happo', 'size']}: reuse rescued HAPPO's exploration failures."
-        + (f" Leaning on the peer traps the agents: {traps} (the paper recommends lambda = 0.4)." if lam else ""),
-    ]
+    maze_text, maze = _maze_paragraph(glance, counts)
+    out = ["What the paper claims: agents that update one after another (HAPPO's scheme) and also learn from another "
+           "agent's experience while their policies are within KL sigma (Eq. 9) learn faster than agents that use only "
+           "their own experience, and avoid the local optima that full parameter sharing (MAPPO) falls into.", maze_text]
     sharing = smax_sharing()
+    matched = sharing[sharing["mappo"] >= sharing["best_oappo"]] if len(sharing) else sharing
     if len(sharing):
-        beats = sharing[sharing["mappo"] >= sharing["happo"]]
         out.append(
-            f"On SMAX (Section 6.2, at a `cpu` budget of {smax_share()} of HARL's steps per map), MAPPO, which only shares "
-            f"one network, ended at or above HAPPO on {len(beats)} of {len(sharing)} maps and reached a 50% win rate "
-            f"faster with P = " + ", ".join(f"{p:.2f} ({mp})" for mp, p in sharing["p_mappo_faster"].items())
-            + f"; {int(counts.loc['6.2'].get(verdicts.SHARING, 0))} of the readings' claims over HAPPO or MAPPO are tests "
-            "of parameter sharing rather than of reuse, because those readings share networks and hardly reused across them.")
+            f"On SMAX (Section 6.2, Fig. 4 at a `cpu` budget of {smax_share()} of HARL's steps per map), MAPPO, which only "
+            f"shares one network, ended with a final win rate IQM at or above HAPPO's on "
+            f"{int((sharing['mappo'] >= sharing['happo']).sum())} of {len(sharing)} maps and at or above the best OAPPO "
+            f"reading's on {len(matched)}, and reached a 50% win rate faster than HAPPO with P = "
+            + ", ".join(f"{p:.2f} ({mp})" for mp, p in sharing["p_mappo_faster"].items())
+            + f". {int(counts.loc['6.2'].get(verdicts.SHARING, 0))} claims of Section 6.2 are tests of parameter sharing "
+            "rather than of reuse: those readings share networks and hardly reused across them.")
     sel = selection_results()
     helped, selected, tested = outcome(sel)
     if sel:
-        parts = [f"{env} (at least {r['seeds']} seed pairs on disk): " + "; ".join(
-            f"{k} {v.status} ({v.estimate.split(': ')[-1]})" if v.status not in (verdicts.NOT_TESTABLE, verdicts.NOT_RUN)
-            else f"{k} {v.status}" for k, v in r.items() if k != "seeds") for env, r in sel.items()]
+        parts = []
+        for env, r in sel.items():
+            seeds = ", ".join(f"{label} {n}" for label, n in r["seeds"].items())
+            parts.append(f"{env} ({r['steps'] / 1e6:g}M steps; seeds on disk of {r['planned']} planned: {seeds}): " + "; ".join(
+                f"{k} {v.status} ({v.estimate})" if v.status in DECIDED else f"{k} {v.status} ({v.reason})"
+                for k, v in r.items() if k in SELECTION_TESTS.values()))
         out.append(
-            "What the engines say about selective reuse, from the seed-paired ablation at equal settings (a net per "
-            "agent; final value differences paired by seed, 1M steps): " + ". ".join(parts) + ". Selection "
-            + (f"helped on {', '.join(selected)}." if selected else
-               f"did not help: on none of the {len(tested)} envs where it could be judged did the gated curve end above "
-               "the always-on one with its interval above 0.")
+            "What the engines say about selective reuse, from the seed-paired ablation at equal settings (a seed gives "
+            "every curve the same initial networks; final values differenced seed by seed): " + ". ".join(parts) + ". "
+            + (f"Selection helped on {', '.join(selected)}." if selected else
+               f"Selection was not shown to help: on none of the {len(tested)} envs where an interval decided it did "
+               "gated reuse end above always-on reuse with its interval above 0.")
             + (f" Reuse itself ended above no reuse, interval above 0, on {', '.join(helped)}."
                if helped else " Reuse itself never ended above no reuse with its interval above 0."))
     never = unrun(glance)
-    if never:
-        plans = {f: costs.plan("paper", figures=(f,), from_nothing=True)[0][0] for f in UNRUN_FIGURES}
+    if len(never):
+        plans = {f: costs.plan("paper", figures=(f,), from_nothing=True)[0][0]
+                 for f in dict.fromkeys(_figure_of(row) for _, row in never.iterrows())}
         out.append(
-            "Never tested: " + "; ".join(f"{c.split(' (')[0]} ({b})" for c, b in never) + ". The `paper` budgets of "
-            "those figures would take " + "; ".join(
+            "Never run: " + "; ".join(f"{c.split(' (')[0]} ({b})" for c, b in zip(never["claim"], never["budget"]))
+            + ". The `paper` budgets of those figures: " + "; ".join(
                 f"{f}: {p.runs} runs, {p.steps / 1e9:.3g}B env steps, {p.cpu_hours:,.0f} CPU hours"
-                + (f" for the {p.runs - p.unpriced} priced runs ({p.unpriced} without a measured cost)" if p.unpriced else "")
+                + (f" for the {p.runs - p.unpriced} runs with a measured cost ({p.unpriced} without)" if p.unpriced else "")
                 for f, p in plans.items()) + ".")
     out.append(
-        "What to take away about off-agent reuse: on the mazes, where the agents' goals differ, a moderate share of "
-        "another agent's experience speeds learning and a large one traps. On the engines at these budgets, plain "
-        "parameter sharing matched or beat OAPPO's readings over HAPPO; reuse across networks at equal settings "
+        "What to take away about off-agent reuse: on the mazes, where the agents' goals differ at some cells, "
+        + ("a moderate share of another agent's experience (lambda = 0.7) spared the runs HAPPO lost to exploration"
+           if maze["rescued"] else "reuse did not spare HAPPO's failed runs")
+        + (", and a larger one trapped them." if maze["trapped"] else ".")
+        + (f" On SMAX at these budgets plain parameter sharing ended at or above every OAPPO reading on {len(matched)} "
+           f"of {len(sharing)} maps." if len(sharing) else "")
+        + " In the seed-paired ablation reuse across networks "
         + (f"ended above no reuse on {', '.join(helped)}" if helped else "never ended above no reuse with its interval above 0")
         + ", and gating it by the policies' KL "
-        + (f"helped on {', '.join(selected)}." if selected else "added nothing measurable over reusing always."))
+        + (f"helped on {', '.join(selected)}." if selected else
+           f"was not shown to help on any of the {len(tested)} envs where it was decided."))
     return out
 
 
 def opening(glance: pd.DataFrame | None = None) -> str:
     """The README's opening: the findings in three sentences."""
     glance = claims.glance() if glance is None else glance
-    m = mazes(glance)
-    below = m["below"]
+    _, maze = _maze_paragraph(glance, claims.summary(glance))
+    below = maze["m"]["below"]
     sharing = smax_sharing()
     _, selected, tested = outcome(selection_results())
-    return (f"On the mazes, reuse at lambda = 0.7 learned faster than HAPPO ({_estimate(m['faster'])}) and ended below 95% "
-            f"of the optimum on {below.loc['oappo', 'sum']} of {below.loc['oappo', 'size']} generated-layout runs against "
-            f"HAPPO's {below.loc['happo', 'sum']}, while a larger share of the peer's experience (lambda <= 0.4) trapped "
-            f"the agents. On SMAX, MAPPO's plain parameter sharing ended at or above HAPPO on "
-            f"{int((sharing['mappo'] >= sharing['happo']).sum())} of {len(sharing)} maps, and in a seed-paired ablation "
-            f"gated reuse ended above always-on reuse on {len(selected)} of the {len(tested)} envs where it could be judged"
-            + (f" ({', '.join(tested)})" if tested else "") + f". Google Research Football beyond {grf_steps() / 1e3:g}k "
-            "steps, the MMM2 stand-in and the paper's own step budgets were never run; the table below says claim by "
-            "claim what held.")
+    never = unrun(glance)
+    faster = maze["m"]["faster"]
+    first = (f"On the mazes, OAPPO (lambda = 0.7) "
+             + ("learned faster than HAPPO" if faster["verdict"] == verdicts.REPRODUCED else "was not shown to learn faster than HAPPO")
+             + f" ({_estimate(faster)}, {faster['verdict']}) and ended below 95% of the optimum on {below.loc['oappo', 'sum']} of "
+             f"{below.loc['oappo', 'size']} generated-layout runs against HAPPO's {maze['happo']}"
+             + (", while leaning on the peer (" + ", ".join(f"lambda = {c.split('=')[1]}: {n}" for c, n in maze["lean"].items())
+                + ") trapped the agents." if maze["trapped"] else "."))
+    second = (f" On SMAX, MAPPO's plain parameter sharing ended at or above HAPPO on "
+              f"{int((sharing['mappo'] >= sharing['happo']).sum())} of {len(sharing)} maps" if len(sharing) else " ")
+    second += (f"{',' if len(sharing) else ''} and in a seed-paired ablation gated reuse ended above always-on reuse on "
+               f"{len(selected)} of the {len(tested)} envs where an interval decided it"
+               + (f" ({', '.join(tested)})" if tested else "") + ".")
+    third = (" Never run: " + ", ".join(dict.fromkeys(c.split(":")[0] for c in never["claim"]))
+             + "; the table below says claim by claim what held." if len(never) else
+             " The table below says claim by claim what held.")
+    return first + second + third
 
 
 BEGIN, END = "<!-- opening: generated by python -m oapo_lite.study.conclusion -->", "<!-- end of opening -->"

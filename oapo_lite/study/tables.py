@@ -80,6 +80,15 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     return pd.concat(parts) if parts else pd.DataFrame()
 
 
+def with_across_share(df: pd.DataFrame, owners: dict) -> pd.DataFrame:
+    """The rows of ``df`` that hold a reuse matrix, with ``across_share``: M's weight on the seats
+    of other networks (``peer_share`` with ``owners[(env, label)]``), for runs trained before the
+    results recorded it."""
+    df = read_arrays(df, ("reuse_matrix",)).dropna(subset=["reuse_matrix"])
+    return df.assign(across_share=[peer_share(m, owners[env, label])
+                                   for m, env, label in zip(df["reuse_matrix"], df["env"], df["label"])])
+
+
 def readings_table(figure: str, budget: str, y: str, tail: float = 0.2) -> pd.DataFrame:
     """``reuse_table`` of a readings figure's runs on disk at ``budget`` (empty where it has none),
     each curve's seats mapped to their networks by ``seat_networks``."""
