@@ -95,6 +95,11 @@ def outcome(sel: dict) -> tuple[list[str], list[str], list[str]]:
     return helped, selected, tested
 
 
+def gate_share(v: verdicts.Verdict) -> str:
+    """How often the gated curve reused across networks, from a ``verdicts.selects`` verdict's reason."""
+    return "gated curve " + v.reason.rsplit("; oappo gated ", 1)[1]
+
+
 def smax_share() -> str:
     """Fig. 4's ``cpu`` steps as a share of HARL's, the smallest and largest over its maps."""
     fig = get_figure("fig4_smax")
@@ -159,7 +164,8 @@ def findings(glance: pd.DataFrame | None = None) -> list[str]:
         for env, r in sel.items():
             seeds = ", ".join(f"{label} {n}" for label, n in r["seeds"].items())
             parts.append(f"{env} ({r['steps'] / 1e6:g}M steps; seeds on disk of {r['planned']} planned: {seeds}): " + "; ".join(
-                f"{k} {v.status} ({v.estimate})" if v.status in DECIDED else f"{k} {v.status} ({v.reason})"
+                f"{k} {v.status} ({v.estimate}" + (f"; {gate_share(v)}" if k == "gated vs always" else "") + ")"
+                if v.status in DECIDED else f"{k} {v.status} ({v.reason})"
                 for k, v in r.items() if k in SELECTION_TESTS.values()))
         out.append(
             "What the engines say about selective reuse, from the seed-paired ablation at equal settings (a seed gives "
@@ -189,7 +195,9 @@ def findings(glance: pd.DataFrame | None = None) -> list[str]:
         + " In the seed-paired ablation reuse across networks "
         + (f"ended above no reuse on {', '.join(helped)}" if helped else "never ended above no reuse with its interval above 0")
         + ", and gating it by the policies' KL "
-        + (f"helped on {', '.join(selected)}." if selected else
+        + (f"helped on {', '.join(selected)} (" + "; ".join(
+            f"there the {gate_share(sel[e]['gated vs always'])}, and gated against no reuse is "
+            f"{sel[e]['gated vs never'].status}" for e in selected) + ")." if selected else
            f"was not shown to help on any of the {len(tested)} envs where it was decided."))
     return out
 

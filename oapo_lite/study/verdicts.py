@@ -285,6 +285,8 @@ RULE = f"""How a verdict is decided (oapo_lite.study.verdicts), in this order:
    always weigh each other, at KL 0: that is parameter sharing, not a gate's decision); it says
    when the gate last opened across networks. Where the curve's seats share networks, the claim
    is a test of sharing instead. Either way the interval's reading (step 3) is given beside it.
+   Not for a claim that a gated curve beats the same curve reusing always (selection): a gate
+   that shuts is what such a claim tests, and its reason says how often the gate let reuse in.
 3. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval of
    P(a better than b) (or of the final IQM, for "stays below" / "reaches"; of the share of seeds
    that reached the threshold minus the other curve's, for "as reliably") is on the claimed
@@ -386,6 +388,16 @@ def paired_higher(ev: Evidence, a, b, claim: str) -> Verdict:
     return Verdict(claim, status, f"{ev.metric.final} ({ev.metric.window}), IQM [95% CI]: {_fmt_final(ev, a)} vs "
                                   f"{_fmt_final(ev, b)}; paired difference {d.fmt()} ({(runs[a] > runs[b]).sum()} of "
                                   f"{len(runs)} seeds higher).", estimate, _reason(status, estimate, "above 0", 0))
+
+
+def selects(ev: Evidence, a, b, claim: str) -> Verdict:
+    """Claim: the gated curve ``a`` ends above ``b``, the same curve reusing always, seed by seed
+    (``paired_higher``). What it tests is Eq. 9's selection, shutting the gate included, so
+    ``check`` leaves out the reuse check (``RULE``, step 2); the reason says how often ``a``
+    reused across networks while it learned."""
+    v = paired_higher(ev, a, b, claim)
+    return replace(v, reason=f"{v.reason}; {a} reused across networks at {ev.summary.loc[a, 'reusing']:.1%} of its "
+                             "evaluated iterations while it learned")
 
 
 def stabler(ev: Evidence, a, b, claim: str) -> Verdict:
@@ -519,7 +531,7 @@ def check(ev: Evidence | None, test, labels, claim: str) -> Verdict:
     why = _undecidable(ev, test, labels)
     if why:
         return Verdict(claim, NOT_TESTABLE, "", "", why)
-    verdict, gap = test(ev, *labels, claim), reuse_gap(ev, labels)
+    verdict, gap = test(ev, *labels, claim), None if test is selects else reuse_gap(ev, labels)
     if gap:  # the interval's reading stays beside the status that says what the runs tested
         verdict = replace(verdict, status=gap[0], reason=f"{gap[1]}; {INTERVAL_ALONE} {verdict.status}: {verdict.reason}")
     gaps = ev.runs.groupby("label")["gaps"].sum()

@@ -134,7 +134,7 @@ def test_the_conclusion_says_what_the_data_gives():
         fig = figures.get_figure(figure)
         for claim, v in zip(fig.claims, claims.judge(fig, experiments.load_figure(figure, "cpu", skip_missing=True))):
             key = conclusion.SELECTION_TESTS[tuple(claim[-2])]
-            assert f"{key} {v.status} ({v.estimate if v.status in conclusion.DECIDED else v.reason})" in text, (key, v)
+            assert f"{key} {v.status} ({v.estimate if v.status in conclusion.DECIDED else v.reason}" in text, (key, v)
     helped, selected, tested = conclusion.outcome(conclusion.selection_results())
     assert set(selected) <= set(tested)
     assert ("Selection helped" in text) == bool(selected)

@@ -3,7 +3,7 @@ each gate statistic of Eq. 9, and the ablation that tests Eq. 9's selection (``s
 from __future__ import annotations
 
 from oapo_lite.reuse import KL_REDUCES
-from oapo_lite.study.verdicts import paired_higher
+from oapo_lite.study.verdicts import paired_higher, selects
 
 # ten seeds that chose no setting (the sweep used 0-2, Fig. 4 and the sigma rule 0-4, the
 # early-reuse study 0-9)
@@ -56,7 +56,7 @@ def selection_claims(env: str, sigma: dict, prefix: str = "", name: str | None =
     if "agent" in sigma:
         out = [(paired_higher, ("oappo gated", "happo"), f"{name}: gated reuse (a net per agent, sigma "
                                                           f"{sigma['agent']:g}) ends above no reuse (HAPPO)"),
-               (paired_higher, ("oappo gated", "oappo always"), f"{name}: gated reuse ends above always-on reuse "
+               (selects, ("oappo gated", "oappo always"), f"{name}: gated reuse ends above always-on reuse "
                                                                  "(selection helps)"), *out]
     if "type" in sigma:
         out.append((paired_higher, ("oappo type gated", "oappo type own type"),
