@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import signal
 import sys
 import time
@@ -244,4 +245,8 @@ if __name__ == "__main__":
     status = main()
     for sig in (signal.SIGINT, signal.SIGTERM):  # a late signal cannot turn the exit status into a traceback
         signal.signal(sig, signal.SIG_IGN)
+    if status == 130:  # interrupted: the work is stopped and written; the interpreter's shutdown restores the
+        sys.stdout.flush()  # default handlers, where a signal still pending would end the process by that
+        sys.stderr.flush()  # signal instead of 130 (seen on a loaded machine), so leave without it
+        os._exit(status)
     sys.exit(status)

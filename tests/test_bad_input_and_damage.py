@@ -1002,5 +1002,6 @@ def test_an_interrupt_while_the_command_still_imports_is_one_line_and_130(tmp_pa
         if driver.returncode == -sig and not err:  # a loaded machine: the signal came before the interpreter ran
             continue                               # any of the package, which no Python program can handle
         checked += 1
-        assert driver.returncode == 130 and "Traceback" not in err and "run the same command again" in err, err
+        assert driver.returncode == 130 and "Traceback" not in err and "run the same command again" in err, \
+            (delay, driver.returncode, err)
     assert checked, "every signal came before the package ran or after the run ended: nothing was tested"
