@@ -138,7 +138,7 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
             rows.append({"section": fig.section, "claim": v.claim, "notebook": fig.notebook, "verdict": lead.status,
                          "budget": budget_share(fig, env, lead_budget, (seeds2 if w is not None else seeds).get(env)),
                          "why": lead.reason,
-                         "at 5 seeds": "-" if w is None else v.status, "why at 5 seeds": "-" if w is None else v.reason})
+                         "at 5 seeds": ONE_BUDGET if w is None else v.status, "why at 5 seeds": "-" if w is None else v.reason})
         for env, texts in unrun.items():
             env = env or fig.common.get("env", fig.id)  # a figure on one env
             rows.append({"section": fig.section, "claim": f"{env.removeprefix(fig.claims_per_env or '')}: {len(texts)} "
@@ -150,6 +150,8 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> pd.DataFrame:
 
 
 GLANCE_COLUMNS = ["section", "claim", "notebook", "verdict", "budget", "why", "at 5 seeds", "why at 5 seeds"]
+# "at 5 seeds" where the claim has one budget only (the engines): its verdict is that budget's
+ONE_BUDGET = "the verdict: one budget"
 
 
 def _check_glance(df: pd.DataFrame, needed=("section", "claim", "verdict")) -> None:
