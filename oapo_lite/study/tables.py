@@ -62,15 +62,12 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     lacking = [c for c in ("env", "label", "seed", "step", y) if c not in df]
     if lacking:
         raise ValueError(f"the runs lack the columns {lacking} (experiments.load_figure's rows have them)")
-    df = read_arrays(df, ("reuse_matrix",))  # JSON text, as a CSV holds it, or arrays already
     unknown = sorted({(e, label) for e, label in zip(df["env"], df["label"])} - set(owners))
     if unknown:
         raise ValueError(f"owners names no network of each seat for {unknown} (seat_networks gives them)")
-    for env, part in df[df["reuse_matrix"].notna()].groupby("env", sort=False):
+    for env, part in with_across_share(df, owners).groupby("env", sort=False):
         final = verdicts.per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
-        across = pd.Series([peer_share(m, owners[env, label]) for m, label in zip(part["reuse_matrix"], part["label"])],
-                           index=part.index)
-        per_seed = across.groupby([part["label"], part["seed"]], sort=False)
+        per_seed = part["across_share"].groupby([part["label"], part["seed"]], sort=False)
         parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
                      .join(per_seed.apply(lambda x: (x > 0).mean()).groupby(level=0, sort=False).mean()
                            .rename("across_reusing"))
