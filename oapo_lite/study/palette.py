@@ -21,7 +21,7 @@ PALETTE = {
     # the selection ablation: gated reuse (Eq. 8's weights, and a sampled source), always-on reuse, and per type
     # within its type only
     "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own type": "#7fb8b3",
-    "oappo gated sampled": "#7b6888",
+    "oappo gated sampled": "#7b6888", "oappo always sampled": "#e7cb94",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
     "oappo entropy x W[i,i]": "#5254a3",

@@ -93,37 +93,48 @@ def summary(df: pd.DataFrame, figure: str) -> pd.DataFrame:
                                        "across_share"])
 
 
-# the gated curve trained with Algorithm 1's sampled source, and with Eq. 8's weights
-SAMPLED, WEIGHTED = "oappo gated sampled", "oappo gated"
-
-
 def estimators(df: pd.DataFrame, figure: str) -> pd.DataFrame:
-    """Per env where a selection figure trained the gated curve both ways (``SAMPLED``,
-    ``WEIGHTED``; ``figures.readings.COST_ENVS``): the sampled source's final value minus the
-    weights', seed by seed (the mean over the paired seeds with its 95% interval, by the
-    figure's metric), and what each curve and HAPPO cost: CPU seconds per 1,000 env steps,
-    evaluations included, the median over the runs' own records."""
+    """Per env and pair of a selection figure's curves trained both ways
+    (``figures.readings.SAMPLED``: Algorithm 1's sampled source, Eq. 8's weights): the sampled
+    curve's final value minus the weights', seed by seed (the mean over the paired seeds with
+    its 95% interval, by the figure's metric); how often each reused across networks while it
+    learned (the share of its evaluated iterations, as the verdict rule counts it); and what
+    each and HAPPO cost: CPU seconds per 1,000 env steps, evaluations included, the median over
+    the runs' own records."""
     metric, rows = figures.get_figure(figure).metric, []
     for env, sub in df.groupby("env", sort=False) if len(df) else []:
-        if not {SAMPLED, WEIGHTED} <= set(sub["label"]):
-            continue
-        pairs, d = verdicts.paired_difference(sub, SAMPLED, WEIGHTED, metric.column, metric.tail)
+        ev = verdicts.Evidence(sub, metric=metric)
         last = sub.sort_values("step").groupby(["label", "seed"]).tail(1)
         cost = (1000 * last["cpu_s"] / last["step"]).groupby(last["label"]).median()
-        rows.append({"env": env, "pairs": len(pairs), "sampled minus weights": d.point, "low": d.low, "high": d.high,
-                     "sampled higher": int((pairs["difference"] > 0).sum()),
-                     **{f"CPU-s {label}": cost.get(label, np.nan) for label in ("happo", WEIGHTED, SAMPLED)}})
+        for sampled, weighted in figures.readings.SAMPLED.items():
+            if not {sampled, weighted} <= set(sub["label"]):
+                continue
+            pairs, d = verdicts.paired_difference(sub, sampled, weighted, metric.column, metric.tail)
+            rows.append({"env": env, "sampled": sampled, "weights": weighted, "pairs": len(pairs),
+                         "sampled minus weights": d.point, "low": d.low, "high": d.high,
+                         "sampled higher": int((pairs["difference"] > 0).sum()),
+                         "reused sampled": ev.summary.loc[sampled, "reusing"],
+                         "reused weights": ev.summary.loc[weighted, "reusing"],
+                         "CPU-s happo": cost.get("happo", np.nan), "CPU-s weights": cost[weighted],
+                         "CPU-s sampled": cost[sampled]})
     return pd.DataFrame(rows)
 
 
 def estimator_sentence(row: pd.Series, figure: str) -> str:
-    """One line of ``estimators``'s table in words: the paired difference, read against 0, and
-    what each estimator cost against HAPPO."""
+    """One line of ``estimators``'s table in words: the paired difference, read against 0, how
+    often each curve reused, and what each cost against HAPPO. Where either curve reused across
+    networks at fewer than ``verdicts.REUSE_PART`` of its evaluated iterations, the pair compares
+    no estimator of reuse, and the line says so."""
     d = statistics.Interval(row["sampled minus weights"], row["low"], row["high"])
     side = ("" if np.isnan(d.low) else "wholly above 0; " if d.low > 0 else "wholly below 0; " if d.high < 0 else
             "interval across 0; ")
     happo = row["CPU-s happo"]
-    return (f"{row['env']}: Algorithm 1's sampled source minus Eq. 8's weights, {figures.get_figure(figure).metric.final} "
-            f"paired over {row['pairs']} seeds: {d.fmt()} ({side}sampled higher on {row['sampled higher']} of "
-            f"{row['pairs']}); CPU per env step {row[f'CPU-s {SAMPLED}'] / happo:.2f}x HAPPO's sampled, "
-            f"{row[f'CPU-s {WEIGHTED}'] / happo:.2f}x with the weights")
+    few = [way for way in ("sampled", "weights") if row[f"reused {way}"] < verdicts.REUSE_PART]
+    hardly = (f"; {' and '.join({'sampled': 'the sampled curve', 'weights': 'the weights curve'}[w] for w in few)} "
+              f"reused at below {verdicts.REUSE_PART:.0%}, so the pair compares no estimator of reuse" if few else "")
+    return (f"{row['env']}, {row['weights']}: Algorithm 1's sampled source minus Eq. 8's weights, "
+            f"{figures.get_figure(figure).metric.final} paired over {row['pairs']} seeds: {d.fmt()} ({side}sampled "
+            f"higher on {row['sampled higher']} of {row['pairs']}); reused across networks at "
+            f"{row['reused sampled']:.1%} of the evaluated iterations while learning sampled, "
+            f"{row['reused weights']:.1%} with the weights{hardly}; CPU per env step "
+            f"{row['CPU-s sampled'] / happo:.2f}x HAPPO's sampled, {row['CPU-s weights'] / happo:.2f}x with the weights")

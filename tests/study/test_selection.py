@@ -46,27 +46,34 @@ def test_gate_use_counts_the_across_network_pairs_open_and_shut():
     assert use.loc[0, ["pair-iterations", "open", "shut", "across_share"]].tolist() == [6, 0.5, 0.5, 0.2]
 
 
-def test_the_sampled_curve_is_the_gated_curve_drawing_one_source():
+def test_the_sampled_curves_are_the_weighted_ones_drawing_one_source():
     for figure in ("fig_selection_smax", "fig_selection_mamujoco"):
         by = {(r.cfg.env, r.label): r.cfg for r in figures.runs_of(figure, "cpu") if r.cfg.seed == 10}
-        sampled = {env for env, label in by if label == selection.SAMPLED}
-        assert sampled == set(figures.readings.COST_ENVS) & {env for env, _ in by}
-        for env in sampled:
-            weighted = by[env, selection.WEIGHTED]
-            assert weighted.reuse_mode == "weights"
-            assert by[env, selection.SAMPLED] == dataclasses.replace(weighted, reuse_mode="sample")
+        envs = {env for env, _ in by}
+        for sampled, weighted in figures.readings.SAMPLED.items():
+            assert {env for env, label in by if label == sampled} == set(figures.readings.COST_ENVS) & envs
+            for env in set(figures.readings.COST_ENVS) & envs:
+                assert by[env, weighted].reuse_mode == "weights"
+                assert by[env, sampled] == dataclasses.replace(by[env, weighted], reuse_mode="sample")
 
 
-def test_estimators_pairs_the_seeds_and_prices_each_curve_from_its_records():
+def test_estimators_pairs_the_seeds_counts_reuse_and_prices_each_curve_from_its_records():
+    reuse, alone = np.array([[0.7, 0.3], [0.3, 0.7]]), np.eye(2)
     rows = []
-    # final win rates (the last 3 evaluations' mean) per seed: weights 0.5, 0.6, 0.7; sampled 0.6, 0.6, 0.9
-    for seed, (w, s) in enumerate([(0.5, 0.6), (0.6, 0.6), (0.7, 0.9)]):
-        for label, final, cpu in (("oappo gated", w, 3.0 + seed), (selection.SAMPLED, s, 1.0), ("happo", 0.0, 2.0)):
+    # final win rates (the last 3 evaluations' mean) per seed: weights 0.2, 0.3, 0.4; sampled 0.3, 0.3, 0.6
+    for seed, (w, s) in enumerate([(0.2, 0.3), (0.3, 0.3), (0.4, 0.6)]):
+        for label, final, cpu, m in (("oappo gated", w, 3.0 + seed, reuse), ("oappo gated sampled", s, 1.0, alone),
+                                     ("happo", 0.0, 2.0, alone)):
             rows += [{"env": "smax:2s3z", "label": label, "seed": seed, "step": 1000 * k, "eval_success": final,
-                      "cpu_s": cpu * k} for k in range(1, 4)]
+                      "cpu_s": cpu * k, "reuse_matrix": m} for k in range(1, 4)]
     out = selection.estimators(pd.DataFrame(rows), "fig_selection_smax").iloc[0]
-    assert out["pairs"] == 3 and out["sampled higher"] == 2
+    assert (out["sampled"], out["weights"], out["pairs"], out["sampled higher"]) == ("oappo gated sampled", "oappo gated", 3, 2)
     assert out["sampled minus weights"] == pytest.approx((0.1 + 0.0 + 0.2) / 3)
     assert out["low"] <= out["sampled minus weights"] <= out["high"]
+    # every evaluation of the weights curve gave the peer weight, none of the sampled one's
+    assert (out["reused weights"], out["reused sampled"]) == (1.0, 0.0)
     # CPU seconds per 1,000 steps: the median over seeds of the last row's cpu_s / step
-    assert out[["CPU-s happo", "CPU-s oappo gated", "CPU-s oappo gated sampled"]].tolist() == pytest.approx([2.0, 4.0, 1.0])
+    assert out[["CPU-s happo", "CPU-s weights", "CPU-s sampled"]].tolist() == pytest.approx([2.0, 4.0, 1.0])
+    line = selection.estimator_sentence(out, "fig_selection_smax")
+    assert "the sampled curve reused at below 25%, so the pair compares no estimator of reuse" in line
+    assert "0.50x HAPPO's sampled, 2.00x with the weights" in line
