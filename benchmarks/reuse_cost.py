@@ -8,17 +8,25 @@ every source it reuses, so its learning grows with that count; the "sample" read
 1's lines 5-6: one source drawn from M per learner and iteration) trains on one seat's samples,
 as HAPPO does. HAPPO is measured first and last, so that drift on a shared machine shows.
 
+Each run's update is then split into where its CPU time goes, per 1,000 env steps: the
+learners' surrogate forwards (Eq. 8 on every source's samples, with the per-source importance
+ratios), their backward passes and Adam steps, K between every pair of networks (Eq. 9), the
+rest of the sequential update (each learner's diagnostics and the factor rho) and the critic.
+The extra over HAPPO's column is what reuse costs in that part.
+
     .venv/bin/python benchmarks/reuse_cost.py [--envs smax:2s3z mamujoco:HalfCheetah-2x3] [--periods 1]
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import tempfile
 import time
 
 import numpy as np
 
+from oapo_lite.neural import losses, ppo_family
 from oapo_lite.neural.runstate import load_history
 from oapo_lite.neural.train import train
 from oapo_lite.study import figures
@@ -37,19 +45,65 @@ READINGS = {  # label of the figure's curve, and what changes from it
 }
 
 
+# the update's parts, as (name, module, function): each is timed where the update calls it; a
+# part named after another is inside it, and is taken out of it
+PARTS = (("the update", ppo_family.PPOFamilyLearner, "learn"), ("surrogate forwards", ppo_family, "ppo_loss"), ("of which the ratios", ppo_family, "off_agent_objective"),
+         ("learners' updates", ppo_family, "update_actors"), ("K (Eq. 9)", ppo_family, "pairwise_distances"),
+         ("critic", ppo_family, "update_critic"), ("advantage", ppo_family, "advantages"))
+
+
+@contextlib.contextmanager
+def timed_parts():
+    """CPU seconds spent in each of ``PARTS`` (a dict filled while the block runs)."""
+    spent = dict.fromkeys((name for name, _, _ in PARTS), 0.0)
+    originals = [(module, fn, getattr(module, fn)) for _, module, fn in PARTS]
+
+    def timer(name, f):
+        def wrapped(*args, **kwargs):
+            tic = time.process_time()
+            try:
+                return f(*args, **kwargs)
+            finally:
+                spent[name] += time.process_time() - tic
+        return wrapped
+
+    for (name, module, fn), (_, _, f) in zip(PARTS, originals):
+        setattr(module, fn, timer(name, f))
+    try:
+        yield spent
+    finally:
+        for module, fn, f in originals:
+            setattr(module, fn, f)
+
+
+def breakdown(spent: dict) -> dict:
+    """The update's CPU seconds split into parts that do not overlap (``PARTS``)."""
+    ratios = spent["of which the ratios"]
+    forwards = spent["surrogate forwards"] - ratios
+    rest = spent["learners' updates"] - spent["surrogate forwards"]
+    named = {"surrogate forwards": forwards, "importance ratios": ratios,
+             "backward passes, Adam, diagnostics, factor": rest, "K (Eq. 9)": spent["K (Eq. 9)"],
+             "critic and advantage": spent["critic"] + spent["advantage"]}
+    return {**named, "the rest of the update": spent["the update"] - sum(named.values())}
+
+
 def measure(cfg) -> dict:
-    """CPU seconds per 1,000 env steps of ``train(cfg)`` (this process), of its learning, and the
-    sources a learner trains on, per learner and iteration."""
+    """CPU seconds per 1,000 env steps of ``train(cfg)`` (this process), of its learning and of
+    its update's parts (``breakdown``), and the sources a learner trains on, per learner and
+    iteration."""
     with tempfile.TemporaryDirectory() as out:
         train(dataclasses.replace(cfg, steps=cfg.iteration_steps), out + "/warm", progress=False)  # builds the env
         timing = {}
-        tic, wall = time.process_time(), time.perf_counter()
-        train(cfg, out + "/run", progress=False, timing=timing)
-        cpu, wall = time.process_time() - tic, time.perf_counter() - wall
+        with timed_parts() as spent:
+            tic, wall = time.process_time(), time.perf_counter()
+            train(cfg, out + "/run", progress=False, timing=timing)
+            cpu, wall = time.process_time() - tic, time.perf_counter() - wall
         history = load_history(out + "/run")
     sources = [np.count_nonzero(np.asarray(h["reuse_matrix"]) > 0, axis=1).mean() for h in history
                if "reuse_matrix" in h]
-    return {"loop": 1000 * cpu / cfg.steps, "learn": timing["learn"] / wall,
+    per_k = 1000 / cfg.steps
+    return {"loop": per_k * cpu, "learn": timing["learn"] / wall,
+            "parts": {k: per_k * v for k, v in breakdown(spent).items()},
             "sources": float(np.mean(sources)) if sources and cfg.reuse_mode == "weights" else np.nan}
 
 
@@ -61,7 +115,7 @@ def main() -> None:
     warm_up()
     for env in args.envs:
         print(f"\n{env}: CPU seconds per 1,000 env steps of the whole loop (the env built before), against "
-              "HAPPO's first run")
+              "HAPPO's first run; below each, the update's parts (CPU-s per 1,000 steps, and the extra over HAPPO's)")
         base = None
         for name, (label, change) in READINGS.items():
             if label not in {r.label for r in figures.runs_of(FIGURE[env], "cpu")}:
@@ -73,6 +127,8 @@ def main() -> None:
             sources = "one drawn from M" if np.isnan(m["sources"]) else f"{m['sources']:.2f}"
             print(f"  {name:44s} {m['loop']:.3f} CPU-s ({m['loop'] / base['loop']:.2f}x HAPPO's), learning "
                   f"{m['learn']:.0%} of the loop's time, sources per learner {sources}", flush=True)
+            print("      " + "; ".join(f"{part} {v:.3f} ({v - base['parts'][part]:+.3f})" for part, v in m["parts"].items()),
+                  flush=True)
 
 
 if __name__ == "__main__":

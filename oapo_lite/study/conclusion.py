@@ -9,7 +9,7 @@ import sys
 
 import pandas as pd
 
-from oapo_lite.study import claims, costs, experiments, layout_study, readme, verdicts
+from oapo_lite.study import claims, costs, experiments, layout_study, readme, selection, verdicts
 from oapo_lite.study.figures import GRID, figure_runs, get_figure
 
 LAYOUT_BUDGET = "paper"  # the layout study's committed runs (5 seeds per layout and curve)
@@ -175,6 +175,12 @@ def findings(glance: pd.DataFrame | None = None) -> list[str]:
                "gated reuse end above always-on reuse with its interval above 0.")
             + (f" Reuse itself ended above no reuse, interval above 0, on {', '.join(helped)}."
                if helped else " Reuse itself never ended above no reuse with its interval above 0."))
+    paired = [(f, row) for f in SELECTION_FIGURES
+              for _, row in selection.estimators(experiments.load_figure(f, "cpu", skip_missing=True), f).iterrows()]
+    if paired:
+        out.append("What reuse costs, from the runs' own records: Eq. 8's weights train each learner on the samples of "
+                   "every seat it reuses, Algorithm 1's sampled source on one seat's, as HAPPO's learner does. "
+                   + "; ".join(selection.estimator_sentence(row, f) for f, row in paired) + ".")
     never = unrun(glance)
     if len(never):
         plans = {f: costs.plan("paper", figures=(f,), from_nothing=True)[0][0]

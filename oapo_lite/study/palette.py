@@ -18,8 +18,10 @@ PALETTE = {
     "oappo one seat": "#98df8a", "oappo type": "#1b7f79",
     "oappo agent max": "#005a32", "oappo agent mean": "#41ab5d", "oappo agent q90": "#a1d99b",
     "oappo type max": "#08519c", "oappo type mean": "#6baed6", "oappo type q90": "#9ecae1",
-    # the selection ablation: gated reuse, always-on reuse, and per type within its type only
+    # the selection ablation: gated reuse (Eq. 8's weights, and a sampled source), always-on reuse, and per type
+    # within its type only
     "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own type": "#7fb8b3",
+    "oappo gated sampled": "#7b6888",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
     "oappo entropy x W[i,i]": "#5254a3",

@@ -21,7 +21,7 @@ import pandas as pd
 
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
-from oapo_lite.study import experiments, figures, verdicts
+from oapo_lite.study import experiments, figures, statistics, verdicts
 
 # (env, reading) -> the figure, curve label and seeds of the OAPPO runs the rule reads
 RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
@@ -91,3 +91,39 @@ def summary(df: pd.DataFrame, figure: str) -> pd.DataFrame:
                          "across_share": use.loc[(env, label), "across_share"]})
     return pd.DataFrame(rows, columns=["env", "label", "seeds", "final", "final_low", "final_high", "sigma", "open",
                                        "across_share"])
+
+
+# the gated curve trained with Algorithm 1's sampled source, and with Eq. 8's weights
+SAMPLED, WEIGHTED = "oappo gated sampled", "oappo gated"
+
+
+def estimators(df: pd.DataFrame, figure: str) -> pd.DataFrame:
+    """Per env where a selection figure trained the gated curve both ways (``SAMPLED``,
+    ``WEIGHTED``; ``figures.readings.COST_ENVS``): the sampled source's final value minus the
+    weights', seed by seed (the mean over the paired seeds with its 95% interval, by the
+    figure's metric), and what each curve and HAPPO cost: CPU seconds per 1,000 env steps,
+    evaluations included, the median over the runs' own records."""
+    metric, rows = figures.get_figure(figure).metric, []
+    for env, sub in df.groupby("env", sort=False) if len(df) else []:
+        if not {SAMPLED, WEIGHTED} <= set(sub["label"]):
+            continue
+        pairs, d = verdicts.paired_difference(sub, SAMPLED, WEIGHTED, metric.column, metric.tail)
+        last = sub.sort_values("step").groupby(["label", "seed"]).tail(1)
+        cost = (1000 * last["cpu_s"] / last["step"]).groupby(last["label"]).median()
+        rows.append({"env": env, "pairs": len(pairs), "sampled minus weights": d.point, "low": d.low, "high": d.high,
+                     "sampled higher": int((pairs["difference"] > 0).sum()),
+                     **{f"CPU-s {label}": cost.get(label, np.nan) for label in ("happo", WEIGHTED, SAMPLED)}})
+    return pd.DataFrame(rows)
+
+
+def estimator_sentence(row: pd.Series, figure: str) -> str:
+    """One line of ``estimators``'s table in words: the paired difference, read against 0, and
+    what each estimator cost against HAPPO."""
+    d = statistics.Interval(row["sampled minus weights"], row["low"], row["high"])
+    side = ("" if np.isnan(d.low) else "wholly above 0; " if d.low > 0 else "wholly below 0; " if d.high < 0 else
+            "interval across 0; ")
+    happo = row["CPU-s happo"]
+    return (f"{row['env']}: Algorithm 1's sampled source minus Eq. 8's weights, {figures.get_figure(figure).metric.final} "
+            f"paired over {row['pairs']} seeds: {d.fmt()} ({side}sampled higher on {row['sampled higher']} of "
+            f"{row['pairs']}); CPU per env step {row[f'CPU-s {SAMPLED}'] / happo:.2f}x HAPPO's sampled, "
+            f"{row[f'CPU-s {WEIGHTED}'] / happo:.2f}x with the weights")

@@ -135,6 +135,11 @@ def test_the_conclusion_says_what_the_data_gives():
         for claim, v in zip(fig.claims, claims.judge(fig, experiments.load_figure(figure, "cpu", skip_missing=True))):
             key = conclusion.SELECTION_TESTS[tuple(claim[-2])]
             assert f"{key} {v.status} ({v.estimate if v.status in conclusion.DECIDED else v.reason}" in text, (key, v)
+        # what reuse cost there: the sampled source against the weights, where both ran
+        from oapo_lite.study import selection
+        df = experiments.load_figure(figure, "cpu", skip_missing=True)
+        for _, row in selection.estimators(df, figure).iterrows():
+            assert selection.estimator_sentence(row, figure) in text
     helped, selected, tested = conclusion.outcome(conclusion.selection_results())
     assert set(selected) <= set(tested)
     assert ("Selection helped" in text) == bool(selected)

@@ -1,4 +1,6 @@
 """Eq. 9's selection ablation: its sigma, fixed by a rule that reads K alone, and its runs' shape."""
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -42,3 +44,29 @@ def test_gate_use_counts_the_across_network_pairs_open_and_shut():
     use = selection.gate_use(df, {})
     # 6 ordered pairs of the 3 seats: 0.01, 0.2, 0.03, 0.05, 0.5, 0.02; within 0.04: three
     assert use.loc[0, ["pair-iterations", "open", "shut", "across_share"]].tolist() == [6, 0.5, 0.5, 0.2]
+
+
+def test_the_sampled_curve_is_the_gated_curve_drawing_one_source():
+    for figure in ("fig_selection_smax", "fig_selection_mamujoco"):
+        by = {(r.cfg.env, r.label): r.cfg for r in figures.runs_of(figure, "cpu") if r.cfg.seed == 10}
+        sampled = {env for env, label in by if label == selection.SAMPLED}
+        assert sampled == set(figures.readings.COST_ENVS) & {env for env, _ in by}
+        for env in sampled:
+            weighted = by[env, selection.WEIGHTED]
+            assert weighted.reuse_mode == "weights"
+            assert by[env, selection.SAMPLED] == dataclasses.replace(weighted, reuse_mode="sample")
+
+
+def test_estimators_pairs_the_seeds_and_prices_each_curve_from_its_records():
+    rows = []
+    # final win rates (the last 3 evaluations' mean) per seed: weights 0.5, 0.6, 0.7; sampled 0.6, 0.6, 0.9
+    for seed, (w, s) in enumerate([(0.5, 0.6), (0.6, 0.6), (0.7, 0.9)]):
+        for label, final, cpu in (("oappo gated", w, 3.0 + seed), (selection.SAMPLED, s, 1.0), ("happo", 0.0, 2.0)):
+            rows += [{"env": "smax:2s3z", "label": label, "seed": seed, "step": 1000 * k, "eval_success": final,
+                      "cpu_s": cpu * k} for k in range(1, 4)]
+    out = selection.estimators(pd.DataFrame(rows), "fig_selection_smax").iloc[0]
+    assert out["pairs"] == 3 and out["sampled higher"] == 2
+    assert out["sampled minus weights"] == pytest.approx((0.1 + 0.0 + 0.2) / 3)
+    assert out["low"] <= out["sampled minus weights"] <= out["high"]
+    # CPU seconds per 1,000 steps: the median over seeds of the last row's cpu_s / step
+    assert out[["CPU-s happo", "CPU-s oappo gated", "CPU-s oappo gated sampled"]].tolist() == pytest.approx([2.0, 4.0, 1.0])

@@ -9,8 +9,10 @@ from oapo_lite.study.verdicts import paired_higher, selects
 # early-reuse study 0-9)
 SELECTION_SEEDS = tuple(range(10, 20))
 # where reuse's cost against HAPPO's is judged (``benchmarks/reuse_cost.py``): there the ablation
-# also trains the gated curve with Algorithm 1's sampled source, the estimator at HAPPO's cost
+# also trains its reusing curves with Algorithm 1's sampled source, the estimator at HAPPO's cost
 COST_ENVS = ("smax:2s3z", "mamujoco:HalfCheetah-2x3")
+# each curve trained with the sampled source, and the same with Eq. 8's weights
+SAMPLED = {"oappo always sampled": "oappo always", "oappo gated sampled": "oappo gated"}
 # the readings of OAPPO's networks, as curve labels and names
 READING_NAMES = {"oappo": "OAPPO (a net per agent)", "oappo type": "OAPPO (a net per type)",
                  "oappo one seat": "OAPPO (one net, seat by seat)"}
@@ -39,15 +41,17 @@ def selection_curves(env: str, sigma: dict, per_agent: dict, per_type: dict | No
     always (sigma = inf) and through the gate, and with ``per_type`` a net per type reusing
     within its type only (lambda = 1) and across types through the gate. ``sigma``: the rule's
     sigma per reading ("agent", "type") on this env; a gated curve joins once it is there. On
-    ``COST_ENVS`` the gated curve is trained twice: with Eq. 8's weights (every source's samples,
-    weighted by M) and with Algorithm 1's lines 5-6 (one source per learner and iteration drawn
-    from M, so a learner trains on one seat's samples, as HAPPO's does)."""
+    ``COST_ENVS`` the curves of a net per agent that reuse are trained twice (``SAMPLED``): with
+    Eq. 8's weights (every source's samples, weighted by M) and with Algorithm 1's lines 5-6 (one
+    source per learner and iteration drawn from M, so a learner trains on one seat's samples, as
+    HAPPO's does)."""
     gated = dict(per_agent, algo="oappo", kl_reduce="mean", env=env)
     curves = [("happo", dict(per_agent, algo="happo", env=env)), ("oappo always", dict(gated, sigma=float("inf")))]
     if "agent" in sigma:
         curves.append(("oappo gated", dict(gated, sigma=sigma["agent"])))
-        if env in COST_ENVS:
-            curves.append(("oappo gated sampled", dict(gated, sigma=sigma["agent"], reuse_mode="sample")))
+    if env in COST_ENVS:
+        weighted = dict(curves)
+        curves += [(label, dict(weighted[of], reuse_mode="sample")) for label, of in SAMPLED.items() if of in weighted]
     if per_type is not None:
         by_type = dict(per_type, env=env)
         curves += [("oappo type own type", dict(by_type, reuse_lambda=1.0)),
