@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from oapo_lite.neural import losses, ppo_family
+from oapo_lite.neural import ppo_family
 from oapo_lite.neural.runstate import load_history
 from oapo_lite.neural.train import train
 from oapo_lite.study import figures
@@ -47,9 +47,10 @@ READINGS = {  # label of the figure's curve, and what changes from it
 
 # the update's parts, as (name, module, function): each is timed where the update calls it; a
 # part named after another is inside it, and is taken out of it
-PARTS = (("the update", ppo_family.PPOFamilyLearner, "learn"), ("surrogate forwards", ppo_family, "ppo_loss"), ("of which the ratios", ppo_family, "off_agent_objective"),
-         ("learners' updates", ppo_family, "update_actors"), ("K (Eq. 9)", ppo_family, "pairwise_distances"),
-         ("critic", ppo_family, "update_critic"), ("advantage", ppo_family, "advantages"))
+PARTS = (("the update", ppo_family.PPOFamilyLearner, "learn"), ("surrogate forwards", ppo_family, "ppo_loss"),
+         ("of which the ratios", ppo_family, "off_agent_objective"), ("learners' updates", ppo_family, "update_actors"),
+         ("K (Eq. 9)", ppo_family, "pairwise_distances"), ("critic", ppo_family, "update_critic"),
+         ("advantage", ppo_family, "advantages"))
 
 
 @contextlib.contextmanager
@@ -127,8 +128,8 @@ def main() -> None:
             sources = "one drawn from M" if np.isnan(m["sources"]) else f"{m['sources']:.2f}"
             print(f"  {name:44s} {m['loop']:.3f} CPU-s ({m['loop'] / base['loop']:.2f}x HAPPO's), learning "
                   f"{m['learn']:.0%} of the loop's time, sources per learner {sources}", flush=True)
-            print("      " + "; ".join(f"{part} {v:.3f} ({v - base['parts'][part]:+.3f})" for part, v in m["parts"].items()),
-                  flush=True)
+            parts = (f"{part} {v:.3f} ({v - base['parts'][part]:+.3f})" for part, v in m["parts"].items())
+            print("      " + "; ".join(parts), flush=True)
 
 
 if __name__ == "__main__":

@@ -133,7 +133,7 @@ def _maze_paragraph(glance: pd.DataFrame, counts: pd.DataFrame) -> tuple[str, di
             + (": reuse rescued HAPPO's exploration failures." if rescued else ": reuse did not lower HAPPO's failures.")
             + " At " + ", at ".join(f"lambda = {c.split('=')[1]} it ended below 95% on {n} of {below.loc[c, 'size']}"
                                     for c, n in lean.items())
-            + (f": leaning on the peer's experience (lambda < 1/2) trapped the agents more often than no reuse, "
+            + (": leaning on the peer's experience (lambda < 1/2) trapped the agents more often than no reuse, "
                "where the paper recommends lambda = 0.4." if trapped else "."))
     return text, {"m": m, "happo": happo, "lean": lean, "rescued": rescued, "trapped": trapped}
 
@@ -217,7 +217,7 @@ def opening(glance: pd.DataFrame | None = None) -> str:
     _, selected, tested = outcome(selection_results())
     never = unrun(glance)
     faster = maze["m"]["faster"]
-    first = (f"On the mazes, OAPPO (lambda = 0.7) "
+    first = ("On the mazes, OAPPO (lambda = 0.7) "
              + ("learned faster than HAPPO" if faster["verdict"] == verdicts.REPRODUCED else "was not shown to learn faster than HAPPO")
              + f" ({_estimate(faster)}, {faster['verdict']}) and ended below 95% of the optimum on {below.loc['oappo', 'sum']} of "
              f"{below.loc['oappo', 'size']} generated-layout runs against HAPPO's {maze['happo']}"

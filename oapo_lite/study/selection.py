@@ -128,7 +128,7 @@ def estimator_sentence(row: pd.Series, figure: str) -> str:
     d = statistics.Interval(row["sampled minus weights"], row["low"], row["high"])
     side = ("" if np.isnan(d.low) else "wholly above 0; " if d.low > 0 else "wholly below 0; " if d.high < 0 else
             "interval across 0; ")
-    happo = row["CPU-s happo"]
+    sampled, weights = (row[f"CPU-s {way}"] / row["CPU-s happo"] for way in ("sampled", "weights"))
     few = [way for way in ("sampled", "weights") if row[f"reused {way}"] < verdicts.REUSE_PART]
     hardly = (f"; {' and '.join({'sampled': 'the sampled curve', 'weights': 'the weights curve'}[w] for w in few)} "
               f"reused at below {verdicts.REUSE_PART:.0%}, so the pair compares no estimator of reuse" if few else "")
@@ -137,4 +137,4 @@ def estimator_sentence(row: pd.Series, figure: str) -> str:
             f"higher on {row['sampled higher']} of {row['pairs']}); reused across networks at "
             f"{row['reused sampled']:.1%} of the evaluated iterations while learning sampled, "
             f"{row['reused weights']:.1%} with the weights{hardly}; CPU per env step "
-            f"{row['CPU-s sampled'] / happo:.2f}x HAPPO's sampled, {row['CPU-s weights'] / happo:.2f}x with the weights")
+            f"{sampled:.2f}x HAPPO's sampled, {weights:.2f}x with the weights")

@@ -67,7 +67,8 @@ def test_estimators_pairs_the_seeds_counts_reuse_and_prices_each_curve_from_its_
             rows += [{"env": "smax:2s3z", "label": label, "seed": seed, "step": 1000 * k, "eval_success": final,
                       "cpu_s": cpu * k, "reuse_matrix": m} for k in range(1, 4)]
     out = selection.estimators(pd.DataFrame(rows), "fig_selection_smax").iloc[0]
-    assert (out["sampled"], out["weights"], out["pairs"], out["sampled higher"]) == ("oappo gated sampled", "oappo gated", 3, 2)
+    assert (out["sampled"], out["weights"], out["pairs"], out["sampled higher"]) == \
+        ("oappo gated sampled", "oappo gated", 3, 2)
     assert out["sampled minus weights"] == pytest.approx((0.1 + 0.0 + 0.2) / 3)
     assert out["low"] <= out["sampled minus weights"] <= out["high"]
     # every evaluation of the weights curve gave the peer weight, none of the sampled one's
