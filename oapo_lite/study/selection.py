@@ -35,8 +35,10 @@ def across_pairs(kl: np.ndarray, owner: list[int]) -> np.ndarray:
     return np.asarray(kl)[~np.equal.outer(owner, owner)]
 
 
-def gate_sigma(env: str, reading: str) -> float:
-    """The rule (module docstring): sigma for the gated curve of ``reading`` on ``env``."""
+def gate_sigma(env: str, reading: str, quantile: float = 0.5) -> float:
+    """The rule (module docstring): sigma for the gated curve of ``reading`` on ``env``; with
+    ``quantile``, that quantile of the same K instead of the median (the dose-response's sigmas,
+    ``figures.readings.DOSE_QUANTILES``)."""
     figure, label, seeds = RULE_RUNS[env, reading]
     values = []
     for run in figures.runs_of(figure, "cpu"):
@@ -44,7 +46,7 @@ def gate_sigma(env: str, reading: str) -> float:
             owner = owners(run.cfg.networks_used, env_registry.agent_types(env, run.cfg.max_steps))
             for kl in experiments.read_run(run.cfg, "cpu")["kl_matrix"].dropna():
                 values.extend(across_pairs(kl, owner))
-    return float(f"{np.median(values):.2g}")
+    return float(f"{np.quantile(values, quantile):.2g}")
 
 
 def gate_use(df: pd.DataFrame, sigma_of: dict) -> pd.DataFrame:

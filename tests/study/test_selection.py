@@ -13,6 +13,23 @@ def test_the_committed_sigma_is_what_the_rule_gives_from_the_committed_runs(env,
     assert figures.SELECTION_SIGMA[env, reading] == selection.gate_sigma(env, reading)
 
 
+@pytest.mark.parametrize("quantile", list(figures.smax.DOSE_SIGMA))
+def test_the_dose_sigmas_are_the_rules_quantiles_of_the_committed_runs(quantile):
+    assert figures.smax.DOSE_SIGMA[quantile] == selection.gate_sigma(figures.smax.DOSE_SMAX, "agent", quantile)
+
+
+def test_the_dose_response_shares_the_ablations_runs_at_its_ends():
+    dose = {r.label: r.cfg for r in figures.runs_of("fig_dose_smax", "cpu") if r.cfg.seed == 10}
+    ablation = {r.label: r.cfg for r in figures.runs_of("fig_selection_smax", "cpu")
+                if r.cfg.seed == 10 and r.cfg.env == figures.smax.DOSE_SMAX}
+    median = figures.readings.dose_label(figures.smax.DOSE_SIGMA[0.5])
+    assert (dose["happo"], dose["oappo always"], dose[median]) == \
+        (ablation["happo"], ablation["oappo always"], ablation["oappo gated"])
+    gated = [c for label, c in dose.items() if label.startswith("oappo sigma=")]
+    assert sorted(c.sigma for c in gated) == sorted(figures.smax.DOSE_SIGMA.values())
+    assert all(dataclasses.replace(c, sigma=np.inf) == dose["oappo always"] for c in gated)
+
+
 def test_the_ablation_pairs_its_curves_on_seeds_that_chose_no_setting():
     chose = {run.cfg.seed for figure in ("fig_sweep_2s3z", "fig4_smax", "fig_early_reuse", "figA_mamujoco")
              for run in figures.runs_of(figure, "cpu")}

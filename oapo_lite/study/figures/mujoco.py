@@ -34,6 +34,9 @@ HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=1
 SELECTION_SIGMA = {(HALFCHEETAH, "agent"): 0.047}
 # the ablation's learner: the one ``fig_mamujoco_normalize``'s rule chose
 SELECTION_LEARNER = dict(FIGA_CURVES["happo"], normalize=True)
+# the dose-response's robot: four legs of two joints, every agent with alike spaces and three
+# peers to choose between (HalfCheetah's two agents give the gate one peer: a switch)
+ANT = "mamujoco:Ant-4x2"
 
 # HARL's MaMuJoCo scale: App. A's ``paper`` budget, and the reference its ``cpu`` budgets are a share of
 HARL_SCALE = At(steps=10_000_000, eval_every=25, eval_episodes=10,
@@ -95,6 +98,11 @@ FIGURES = (
     Figure("fig_mamujoco_normalize", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
            common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
                "smoke": MAMUJOCO_SMOKE, "cpu": APPA_CPU},
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # the learner on Ant 4x2, by ``fig_mamujoco_normalize``'s rule (the higher final IQM), on
+    # seeds 0-2, which the dose-response does not test on
+    Figure("fig_ant_learner", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
+           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": At(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},

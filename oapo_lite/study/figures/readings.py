@@ -13,6 +13,10 @@ SELECTION_SEEDS = tuple(range(10, 20))
 COST_ENVS = ("smax:2s3z", "mamujoco:HalfCheetah-2x3")
 # each curve trained with the sampled source, and the same with Eq. 8's weights
 SAMPLED = {"oappo always sampled": "oappo always", "oappo gated sampled": "oappo gated"}
+# the gate's dose-response: sigma at these quantiles of the across-network K in the runs the
+# sigma rule reads (``selection.gate_sigma``; the median is the ablation's sigma), between no
+# reuse (HAPPO, the gate never open) and always-on reuse (sigma = inf, never shut)
+DOSE_QUANTILES = (0.25, 0.5, 0.75, 0.9)
 # the readings of OAPPO's networks, as curve labels and names
 READING_NAMES = {"oappo": "OAPPO (a net per agent)", "oappo type": "OAPPO (a net per type)",
                  "oappo one seat": "OAPPO (one net, seat by seat)"}
@@ -57,6 +61,21 @@ def selection_curves(env: str, sigma: dict, per_agent: dict, per_type: dict | No
         curves += [("oappo type own type", dict(by_type, reuse_lambda=1.0)),
                    ("oappo type gated", dict(by_type, sigma=sigma["type"]))]
     return tuple(curves)
+
+
+def dose_curves(env: str, sigmas: tuple[float, ...], per_agent: dict) -> tuple:
+    """The dose-response's curves on ``env``: no reuse (HAPPO), a net per agent gated at each
+    sigma in ``sigmas`` (labelled by it), and reusing always: the selection ablation's configs, so
+    that a run both figures hold is trained once."""
+    ends = dict(selection_curves(env, {}, per_agent))
+    gated = dict(ends["oappo always"])
+    return (("happo", ends["happo"]), *((dose_label(s), dict(gated, sigma=s)) for s in sigmas),
+            ("oappo always", ends["oappo always"]))
+
+
+def dose_label(sigma: float) -> str:
+    """A gated curve of the dose-response, by its sigma."""
+    return f"oappo sigma={sigma:g}"
 
 
 def selection_claims(env: str, sigma: dict, prefix: str = "", name: str | None = None) -> list:

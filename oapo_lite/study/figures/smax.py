@@ -3,8 +3,8 @@ settings, OAPPO's readings and the selection ablation."""
 from __future__ import annotations
 
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study.figures.readings import (READING_NAMES, SELECTION_SEEDS, reading_curves, selection_claims,
-                                              selection_curves, sigma_on)
+from oapo_lite.study.figures.readings import (DOSE_QUANTILES, READING_NAMES, SELECTION_SEEDS, dose_curves,
+                                              reading_curves, selection_claims, selection_curves, sigma_on)
 from oapo_lite.study.grid import ENGINE_BUDGETS, At, Figure
 from oapo_lite.study.verdicts import WIN_RATE, faster, higher, stabler
 
@@ -94,6 +94,10 @@ def _smax_claims(m: str) -> list:
 # before the ablation's runs (a test recomputes it from the committed runs)
 SELECTION_SMAX = ("smax:2s3z", "smax:6h_vs_8z")
 SELECTION_SIGMA = {("smax:2s3z", "agent"): 0.046, ("smax:6h_vs_8z", "agent"): 0.068, ("smax:2s3z", "type"): 0.045}
+# the dose-response on 2s3z: the rule's quantiles (``DOSE_QUANTILES``) of the same K, a net per
+# agent (a test recomputes them from the committed runs)
+DOSE_SMAX = "smax:2s3z"
+DOSE_SIGMA = dict(zip(DOSE_QUANTILES, (0.035, 0.046, 0.34, 0.81)))
 
 
 READING_MAPS = ("smax:2s3z", "smax:6h_vs_8z")
@@ -128,6 +132,12 @@ FIGURES = (
                "paper": HARL_STEPS},
            metric=WIN_RATE, claims=tuple(c for env in SELECTION_SMAX for c in selection_claims(env, sigma_on(SELECTION_SIGMA, env), "smax:")),
            claims_per_env="smax:", section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
+    # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on 2s3z, seed-paired
+    # with the selection ablation (its HAPPO, always-on and median-sigma runs are these)
+    Figure("fig_dose_smax", dose_curves(DOSE_SMAX, tuple(DOSE_SIGMA.values()), tuned("happo")),
+           common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("cpu",), budgets={
+               "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64)},
+           metric=WIN_RATE, section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # at the config of Fig. 4's committed runs, so HAPPO, MAPPO and OAPPO (per agent, max) there
     # are those runs, read from the cache
     Figure("fig_readings_smax", tuple(c for env in READING_MAPS for c in reading_curves(
