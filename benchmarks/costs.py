@@ -27,8 +27,8 @@ from oapo_lite.neural.cost import machine
 from oapo_lite.neural.runstate import git_revision, load_history
 from oapo_lite.neural.train import train
 from oapo_lite.store import write_frame
-from oapo_lite.study import experiments
-from oapo_lite.study.costs import COSTS, KEY, cost_key
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.runs.costs import COSTS, KEY, cost_key
 
 from loops import warm_up
 

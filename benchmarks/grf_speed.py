@@ -43,7 +43,7 @@ from oapo_lite.envs import grf
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.runstate import RunState
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 from loops import cut_short, profile, warm_up
 

@@ -12,7 +12,7 @@ import tempfile
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 
 def cut_short(figure: str, budget: str, algo: str, env: str, iterations: int) -> TrainConfig:

@@ -21,8 +21,8 @@ import numpy as np
 
 from oapo_lite.envs import mamujoco, registry
 from oapo_lite.neural.train import train
-from oapo_lite.study.figures import get_figure
-from oapo_lite.study.figures.mujoco import FIGA_ALGOS
+from oapo_lite.study.catalogue.figures import get_figure
+from oapo_lite.study.catalogue.figures.mujoco import FIGA_ALGOS
 
 from loops import cut_short, warm_up
 

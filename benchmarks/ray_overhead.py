@@ -11,7 +11,8 @@ import statistics
 import tempfile
 import time
 
-from oapo_lite.study import executors, figures
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.runs import executors
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--cpus", type=int, default=2)

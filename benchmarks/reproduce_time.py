@@ -22,8 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from oapo_lite.study import experiments
-from oapo_lite.study.figures import MAZE_FIGURES
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.catalogue.figures import MAZE_FIGURES
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--budget", default="paper")

@@ -29,7 +29,7 @@ import numpy as np
 from oapo_lite.neural import ppo_family
 from oapo_lite.neural.runstate import load_history
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 from loops import cut_short, warm_up
 

@@ -1,6 +1,6 @@
 """The check that a change moved no number: every algorithm trained for a few iterations on
 every engine (mazes, SMAX, multi-agent MuJoCo, GRF where it is installed), and the SHA-256 of
-each run's ``results.csv`` (all but its git revision and what it cost) and of its checkpoint's
+each run's ``results.csv`` (all but its git revision, what it cost and what it is) and of its checkpoint's
 tensors. Run it before and after a change that should not move a number (a refactor) and
 compare the two printouts line by line.
 
@@ -21,9 +21,9 @@ import torch
 
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.neural.results import COST
+from oapo_lite.neural.results import COST, STRUCTURE
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 # one short run shape per engine: enough iterations for an evaluation, a checkpoint and, for
 # OAPPO, Eq. 9's weights to act; SePS's pre-training ends inside the run
@@ -63,8 +63,9 @@ def run_hashes(algo: str, env: str, **reading) -> tuple[str, str]:
     with tempfile.TemporaryDirectory() as out:
         train(cfg, out, progress=False)
         rows = list(csv.reader((Path(out) / "results.csv").open()))
-        # the commit and what the run cost differ by design
-        keep = [i for i, name in enumerate(rows[0]) if name != "git_rev" and name not in COST]
+        # the commit and what the run cost differ by design; what the run is (its seats' networks)
+        # was recorded later, and is no number of its learning
+        keep = [i for i, name in enumerate(rows[0]) if name != "git_rev" and name not in COST + STRUCTURE]
         results = hashlib.sha256(repr([[r[i] for i in keep] for r in rows]).encode()).hexdigest()[:16]
         ckpt = next(Path(out).rglob("*.pt"))
         return results, tensor_hash(torch.load(ckpt, weights_only=False))

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from oapo_lite.neural.runstate import git_revision  # noqa: E402
 from oapo_lite.store import atomic_write, write_frame  # noqa: E402
-from oapo_lite.study.statistics import bootstrap_interval, iqm  # noqa: E402
+from oapo_lite.study.judge.statistics import bootstrap_interval, iqm  # noqa: E402
 
 OUT = ROOT / "figures" / "data" / "anchor_halfcheetah_sb3.csv"
 ENV = "HalfCheetah-v5"

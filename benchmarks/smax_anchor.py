@@ -58,7 +58,7 @@ import time
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 STEPS = {"3m": 300_000, "2s3z": 500_000}
 

@@ -24,7 +24,7 @@ import numpy as np
 from oapo_lite.envs.smax import SmaxVec
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures
+from oapo_lite.study.catalogue import figures
 
 from loops import cut_short, profile
 

@@ -22,7 +22,7 @@ import time
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
-from oapo_lite.study.figures import runs_of
+from oapo_lite.study.catalogue.figures import runs_of
 
 from loops import warm_up
 

@@ -194,13 +194,13 @@ def train_main(argv: list[str]) -> int:
 
 
 def _reproduce(argv: list[str]) -> int:
-    from oapo_lite.study.reproduce import main as reproduce_main
+    from oapo_lite.study.runs.reproduce import main as reproduce_main
 
     return reproduce_main(argv)
 
 
 def _book(argv: list[str]) -> int:
-    from oapo_lite.study.book import main as book_main
+    from oapo_lite.study.report.book import main as book_main
 
     return book_main(argv)
 

@@ -9,7 +9,8 @@ from oapo_lite import store
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.oracle import optimal_return
-from oapo_lite.study import experiments
+from oapo_lite.neural.nets import owners
+from oapo_lite.study.runs import experiments
 
 
 def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataFrame:
@@ -24,9 +25,16 @@ def write_run(cfg, budget: str, frac, grid: int = 16_000, **columns) -> pd.DataF
     df = pd.DataFrame({**config, "iteration": steps // cfg.iteration_steps, "step": steps,
                        "eval_return": value * optimum if maze is not None else value,
                        "frac_opt": value if maze is not None else np.nan, "eval_success": np.clip(value, 0, 1),
-                       "git_rev": "test", **learner_columns(cfg, len(steps)), **columns})
+                       "git_rev": "test", **learner_columns(cfg, len(steps)), **structure(cfg, len(steps)), **columns})
     store.write_frame(df, experiments.run_path(cfg, budget))
     return df
+
+
+def structure(cfg, rows: int) -> dict:
+    """What every run records it is: its seats' networks and agent types (``results.STRUCTURE``)."""
+    types = env_registry.agent_types(cfg.env, cfg.max_steps)
+    return {"owner": [json.dumps(owners(cfg.networks_used, types))] * rows,
+            "agent_types": [json.dumps(list(types))] * rows}
 
 
 def learner_columns(cfg, rows: int) -> dict:

@@ -11,8 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oapo_lite.study import experiments, figures, tables, verdicts
-from oapo_lite.study.statistics import iqm
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue.metrics import RETURN, WIN_RATE
+from oapo_lite.study.judge import evidence as ev_
+from oapo_lite.study.judge.statistics import iqm
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.studies import tables
 
 ASSUMPTIONS = Path(__file__).resolve().parents[1] / "ASSUMPTIONS.md"
 
@@ -34,18 +38,16 @@ def load(figure: str, budget: str):
 
 
 def metric_rows(figure: str, budget: str, env: str | None = None):
-    """A figure's rows with the metric's columns alone: without the env and algorithm columns
-    ``verdicts.per_run`` does not ask the engine for the seats' networks (importing SMAX or
-    MuJoCo), which no final level or step count depends on."""
+    """A figure's rows with the metric's columns alone: what a final level or a step count reads."""
     column, df = figures.get_figure(figure).metric.column, load(figure, budget)
     return df.loc[df["env"] == env if env else slice(None), ["label", "seed", "step", column]]
 
 
-def evidence(figure: str, budget: str, env: str | None = None) -> verdicts.Evidence:
+def evidence(figure: str, budget: str, env: str | None = None) -> ev_.Evidence:
     df = load(figure, budget)
     if env is not None:
         df = df[df["env"] == env]
-    return verdicts.Evidence(df, metric=figures.get_figure(figure).metric)
+    return ev_.Evidence(df, figures.get_figure(figure).metric)
 
 
 def quoted(expected: str) -> None:
@@ -76,7 +78,7 @@ def finals(figure: str, budget: str, env: str) -> dict:
     point), from the metric's columns alone: the seats' networks, which need the engine, do not
     enter a final level."""
     metric = figures.get_figure(figure).metric
-    runs = verdicts.per_run(metric_rows(figure, budget, env), metric.threshold, tail=metric.tail, y=metric.column)
+    runs = ev_.per_run(metric_rows(figure, budget, env), metric)
     return {label: float(iqm(part["final"].to_numpy())) for label, part in runs.groupby("label", sort=False)}
 
 
@@ -93,7 +95,7 @@ def test_fig4_final_levels():
 
 def _sweep(figure: str):
     family = {label: re.split(r" lr=", label)[0] for label, _ in figures.get_figure(figure).curves}
-    return tables.sweep_table(metric_rows(figure, "cpu"), family, verdicts.WIN_RATE)
+    return tables.sweep_table(metric_rows(figure, "cpu"), family, WIN_RATE)
 
 
 def test_sweep_on_2s3z():
@@ -122,7 +124,7 @@ def test_a2c_sweep_on_3m():
 
 
 def test_entropy_weight():
-    ev = verdicts.Evidence(metric_rows("fig_entropy_weight", "paper"))
+    ev = ev_.Evidence(metric_rows("fig_entropy_weight", "paper"))
     weighted = figures.get_figure("fig_entropy_weight").curves[1][0]
     p = ev.improvement(weighted, "oappo", "steps")
     quoted(f"steps to 95% IQM {ev.level('oappo', 'steps').point:,.0f} unweighted against "
@@ -130,19 +132,20 @@ def test_entropy_weight():
 
 
 def test_early_reuse_on_halfcheetah():
-    runs, d = verdicts.paired_difference(metric_rows("fig_early_reuse", "cpu"), "oappo", "happo", "eval_return")
-    quoted(f"OAPPO - HAPPO = {d.fmt('.0f')} over the seed pairs (OAPPO lower on {(runs['difference'] < 0).sum()} "
-           f"of {len(runs)}")
+    ev = ev_.Evidence(metric_rows("fig_early_reuse", "cpu"), RETURN)
+    runs, d = ev.pairs("oappo", "happo"), ev.paired("oappo", "happo")
+    quoted(f"OAPPO - HAPPO = {d.fmt('.0f')}, the IQM of the seed pairs' differences (OAPPO lower on "
+           f"{(runs['difference'] < 0).sum()} of {len(runs)}")
 
 
 def test_halfcheetah_settings_and_anchor():
-    runs = verdicts.per_run(metric_rows("fig_mamujoco_settings", "cpu"), np.inf, tail=0.2, y="eval_return")
+    runs = ev_.per_run(metric_rows("fig_mamujoco_settings", "cpu"), RETURN)
     final = runs.groupby("label", sort=False)["final"]
     mean, std = final.mean(), final.std(ddof=1)
     names = {"happo": "ours", "happo clip 0.05": "clip 0.05", "happo 15 epochs": "15 epochs",
              "happo 128x3": "128-128-128", "happo feature norm": "feature normalisation", "happo 20 x 200": "20 x 200",
              "happo HARL": "all together"}
     quoted("; ".join(f"{name} {mean[label]:.0f} +- {std[label]:.0f}" for label, name in names.items()))
-    ev = verdicts.Evidence(metric_rows("fig_single_agent", "cpu"), metric=verdicts.RETURN)
+    ev = ev_.Evidence(metric_rows("fig_single_agent", "cpu"), RETURN)
     quoted(f"HAPPO two legs {ev.level('happo two legs', 'final').fmt('.0f')}")
     quoted(f"our PPO with one agent {ev.level('ppo one agent', 'final').fmt('.0f')}")

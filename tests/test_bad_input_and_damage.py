@@ -2,6 +2,7 @@
 exit status 2 and no traceback; no damaged file is loaded or loses a result; killed and
 concurrent writers leave nothing behind and train nothing twice."""
 import argparse
+import dataclasses
 import errno
 import os
 import re
@@ -27,8 +28,15 @@ from oapo_lite.neural.losses import Diverged
 from oapo_lite.neural.results import learning
 from oapo_lite.neural.runstate import RunState, load_checkpoint
 from oapo_lite.neural.train import _diverged_at, train
-from oapo_lite.study import experiments, figures, plotting, statistics, tables, verdicts
-from oapo_lite.study.executors import train_job
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.catalogue.metrics import FRAC_OPT, WIN_RATE
+from oapo_lite.study.catalogue.tests import Claim
+from oapo_lite.study.judge import evidence, statistics, verdicts
+from oapo_lite.study.report import words
+from oapo_lite.study.studies import tables
+from oapo_lite.study.report import plotting
+from oapo_lite.study.runs.executors import train_job
 
 QUICK = ["--n-envs", "8", "--rollout-len", "25", "--steps", "400", "--eval-episodes", "4", "--no-progress"]
 SMALL = dict(env="black_red", n_envs=8, rollout_len=25, steps=400, eval_every=1, eval_episodes=4)
@@ -137,7 +145,7 @@ def test_an_output_path_that_would_alias_another_folder_is_refused(tmp_path, cap
 
 def test_a_relative_oapo_figures_is_resolved_once_and_a_moved_tree_without_the_committed_runs_is_refused(
         tmp_path, capsys, monkeypatch):
-    from oapo_lite.study import reproduce
+    from oapo_lite.study.runs import reproduce
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("OAPO_FIGURES", "moved")
@@ -321,7 +329,7 @@ def test_a_killed_writers_temporary_files_are_removed_by_the_next_write(tmp_path
 
 def test_a_killed_reproduce_driver_takes_its_workers_with_it(tmp_path):
     env = {**os.environ, "OAPO_FIGURES": str(tmp_path)}
-    driver = subprocess.Popen([sys.executable, "-c", "from oapo_lite.study import experiments; "
+    driver = subprocess.Popen([sys.executable, "-c", "from oapo_lite.study.runs import experiments; "
                                "experiments.run_all('paper', figures=('fig3b',), workers=2, progress=False)"],
                               env=env, stderr=subprocess.DEVNULL)
     def children() -> list[int]:
@@ -563,7 +571,7 @@ def _sleep_with_a_child(seconds: float) -> None:
 
 
 def _sleeping_driver(out: Path) -> None:
-    from oapo_lite.study.executors import in_processes
+    from oapo_lite.study.runs.executors import in_processes
 
     jobs = [(k, (60.0,)) for k in range(5)]
     for _ in in_processes(_sleep_with_a_child, jobs, workers=2):
@@ -597,7 +605,7 @@ def test_stopping_the_process_pool_kills_what_its_jobs_started_and_starts_no_que
 
 
 def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path):
-    from oapo_lite.study.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
 
     with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown notebook parameter\(s\) \['budgte'\]; this "
                                              r"notebook takes \['budget'\]"):
@@ -607,7 +615,7 @@ def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path
 def test_every_notebook_checks_its_parameters_right_after_them():
     import nbformat
 
-    from oapo_lite.study.reproduce import NOTEBOOKS
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
 
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
         cells = nbformat.read(path, as_version=4).cells
@@ -681,14 +689,14 @@ def test_an_engine_evaluation_may_be_empty_and_every_verdict_says_so():
     runs = pd.DataFrame({"label": ["a"] * 8 + ["b"] * 8, "seed": ([0] * 4 + [1] * 4) * 2,
                          "step": list(range(4)) * 4,
                          "eval_success": [0, .5, .9, np.nan, 0, .5, .9, 1, 0, .1, .1, .1, 0, .1, .2, .1]})
-    rows = verdicts.per_run(runs, 0.5, tail=0.5, y="eval_success")
+    rows = evidence.per_run(runs, dataclasses.replace(WIN_RATE, tail=0.5))
     # the window: 3 evaluations at least, of those that hold a value
     assert rows["gaps"].tolist() == [1, 0, 0, 0] and rows["final"].iloc[0] == pytest.approx(np.mean([0, 0.5, 0.9]))
-    ev = verdicts.Evidence(runs, metric=verdicts.WIN_RATE)
-    v = verdicts.check(ev, verdicts.higher, ("a", "b"), "a ends above b")
-    assert v.reason.endswith("1 of a's evaluations hold no value (no evaluation episode ended) and are left out")
+    v = verdicts.check(evidence.Evidence(runs, WIN_RATE), Claim("a ends above b", "higher", ("a", "b")))
+    assert v.empty == (("a", 1),)
+    assert words.reason(v).endswith("1 of a's evaluations hold no value (no evaluation episode ended) and are left out")
     with pytest.raises(ValueError, match=r"curve 'a' has two rows for seed 0 at step 1"):
-        verdicts.per_run(pd.concat([runs, runs.iloc[[1]]]), y="eval_success")
+        evidence.per_run(pd.concat([runs, runs.iloc[[1]]]), WIN_RATE)
 
 
 def test_a_checkpoint_whose_record_contradicts_itself_is_named_as_damaged(tmp_path):
@@ -718,8 +726,8 @@ def test_reading_results_never_writes(tmp_path, monkeypatch):
 
 def test_the_statistics_take_a_frame_with_no_run(tmp_path):
     empty = pd.DataFrame()
-    assert verdicts.per_run(empty).empty and list(verdicts.per_run(empty).columns) == verdicts.PER_RUN_COLUMNS
-    assert verdicts.summary(empty).empty and verdicts.intervals(empty).empty and tables.reuse_summary(empty).empty
+    assert evidence.per_run(empty).empty and list(evidence.per_run(empty).columns) == evidence.PER_RUN_COLUMNS
+    assert evidence.summary(empty).empty and evidence.intervals(empty).empty and tables.reuse_summary(empty).empty
     assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
     assert np.isnan(statistics.probability_of_improvement([np.nan, np.nan], [1, 2]))
     assert statistics.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
@@ -793,7 +801,7 @@ def test_the_api_names_bad_arguments(tmp_path, monkeypatch):
         with pytest.raises(ValueError, match=f"workers = {re.escape(repr(workers))} is invalid"):
             experiments.run_all("smoke", figures=["fig1"], workers=workers)
     with pytest.raises(TypeError, match="must be a pandas DataFrame"):
-        verdicts.summary(None)
+        evidence.summary(None)
     with pytest.raises(ValueError, match=r"square \(n, n\) matrix"):
         plotting.reuse_heatmap(np.array([]))
     assert plotting.final_bars(pd.DataFrame()).texts[0].get_text() == "no runs on disk"
@@ -803,7 +811,7 @@ def test_every_notebook_names_its_kernel():
     """papermill without -k reads the kernel from the notebook."""
     import nbformat
 
-    from oapo_lite.study.reproduce import NOTEBOOKS
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
 
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
         assert nbformat.read(path, as_version=4).metadata.get("kernelspec", {}).get("name") == "python3", path.name
@@ -811,7 +819,7 @@ def test_every_notebook_names_its_kernel():
 
 def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
     """Found by a second hostile audit after the first fixes."""
-    from oapo_lite.study import book
+    from oapo_lite.study.report import book
 
     assert "--budget is given 2 times" in _cli_error(capsys, "reproduce", "--budget", "smoke", "--budget", "cpu")
     assert "--inplace writes" in _cli_error(capsys, "reproduce", "--inplace", "--skip-notebooks")
@@ -827,7 +835,7 @@ def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
     with pytest.raises(TypeError, match="resume must be True or False, got 'false'"):
         train(TrainConfig(**SMALL), tmp_path / "r", resume="false")
     with pytest.raises(ValueError, match=r"lack the columns \['label', 'seed', 'step', 'frac_opt'\]"):
-        verdicts.summary(pd.DataFrame({"a": [1]}))
+        evidence.summary(pd.DataFrame({"a": [1]}))
     with pytest.raises(ValueError, match="with NaN or inf"):
         plotting.reuse_heatmap(np.full((2, 2), np.nan))
     monkeypatch.setenv("OAPO_FIGURES", "")
@@ -835,7 +843,7 @@ def test_the_second_audits_cases_are_refused(tmp_path, capsys, monkeypatch):
 
 
 def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
-    from oapo_lite.study.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
 
     with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget 'nope'"):
         run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": "nope"})
@@ -844,7 +852,8 @@ def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
 @pytest.mark.parametrize("command", ["train", "reproduce", "book"])
 def test_every_flag_says_what_it_means_its_default_and_what_it_allows(command):
     from oapo_lite.neural.config import ALLOWED, MEANING
-    from oapo_lite.study import book, reproduce
+    from oapo_lite.study.runs import reproduce
+    from oapo_lite.study.report import book
 
     parsers = {"train": cli.train_parser, "reproduce": reproduce.command_line, "book": book.command_line}
     for action in parsers[command]()._actions:
@@ -859,7 +868,7 @@ def test_every_flag_says_what_it_means_its_default_and_what_it_allows(command):
 
 
 def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path, capsys, monkeypatch):
-    from oapo_lite.study import reproduce
+    from oapo_lite.study.runs import reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path / "figures"))
     (cfg,) = [cfg for _, cfg in figures.figure_runs("fig1", "smoke")]
@@ -875,17 +884,17 @@ def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path,
 
 
 def test_the_tables_take_no_rows_and_name_what_they_lack():
-    from oapo_lite.study import claims
+    from oapo_lite.study.report import claims
 
-    none = pd.DataFrame(columns=claims.GLANCE_COLUMNS)
+    none = pd.DataFrame(columns=claims.GLANCE_COLUMNS + ["n_claims", "one_seed"])
     assert claims.summary(none).empty and claims.summary_lines(none) == []
-    assert claims.readme_markdown(none).endswith("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    assert claims.readme_markdown(none).endswith("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for table in (claims.summary, claims.summary_lines, claims.readme_markdown):
-        with pytest.raises(ValueError, match=r"the claims lack the columns \['section', 'claim', 'verdict'"):
+        with pytest.raises(ValueError, match=r"summary counts glance_table\(\)'s rows"):
             table(pd.DataFrame())
-    assert tables.reuse_table(pd.DataFrame(), "eval_success", {}).empty
+    assert tables.reuse_table(pd.DataFrame(), WIN_RATE).empty
     with pytest.raises(ValueError, match=r"no runs labelled \['a', 'b'\] to pair; the runs' labels are \[\]"):
-        verdicts.paired_difference(pd.DataFrame(), "a", "b", "frac_opt")
+        evidence.Evidence(pd.DataFrame()).pairs("a", "b")
     one = pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": [1.0]})
     with pytest.raises(ValueError, match=r"no runs of the curves \['nonexistent'\] to draw; the data's curves are "
                                          r"\['a'\]"):
@@ -945,16 +954,19 @@ def test_a_checkpoint_missing_or_garbling_an_entry_is_damaged_named_and_trained_
 
 
 @pytest.mark.parametrize("call, words", [
-    (lambda: verdicts.per_run(pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": ["x"]})),
+    (lambda: evidence.per_run(pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": ["x"]})),
      "'frac_opt' column holds text"),
-    (lambda: verdicts.per_run(pd.DataFrame(), threshold=float("nan")), "threshold = nan is invalid"),
-    (lambda: verdicts.per_run(pd.DataFrame(), tail=5), "tail = 5 is invalid; allowed: a share"),
-    (lambda: verdicts.paired_difference(_two_curves(), "a", "a", "frac_opt"), "a and b are both 'a'"),
-    (lambda: verdicts.paired_difference(_two_curves(b_seed=7), "a", "b", "frac_opt"), "no seed has runs of both"),
-    (lambda: tables.reuse_table(_two_curves().drop(columns="env"), "frac_opt", {}), "lack the columns ['env']"),
-    (lambda: tables.reuse_table(_two_curves(), "frac_opt", {}), "owners names no network of each seat"),
-    (lambda: claims_module().summary(None), "must be glance()'s DataFrame, got NoneType"),
-    (lambda: claims_module().summary(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["held?"]})),
+    (lambda: evidence.per_run(pd.DataFrame(), threshold=float("nan")), "threshold = nan is invalid"),
+    (lambda: evidence.per_run(pd.DataFrame(), dataclasses.replace(FRAC_OPT, tail=5)), "tail = 5 is invalid; allowed: a share"),
+    (lambda: evidence.per_run(pd.DataFrame(), "frac_opt"), "metric must be a catalogue.metrics.Metric"),
+    (lambda: evidence.Evidence(_two_curves().drop(columns="reuse_matrix")).pairs("a", "a"), "a and b are both 'a'"),
+    (lambda: evidence.Evidence(_two_curves(b_seed=7).drop(columns="reuse_matrix")).pairs("a", "b"),
+     "no seed has runs of both"),
+    (lambda: tables.reuse_table(_two_curves().drop(columns="env"), FRAC_OPT), "lack the columns ['env', 'owner']"),
+    (lambda: evidence.per_run(_two_curves()), "the runs hold reuse matrices but no owner column"),
+    (lambda: claims_module().summary(None), "summary counts glance_table()'s rows"),
+    (lambda: claims_module().summary(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["held?"],
+                                                   "n_claims": [1], "one_seed": [False]})),
      "verdicts ['held?'] that are no status"),
     (lambda: claims_module().markdown([1]), "markdown takes a DataFrame, got list"),
     (lambda: plotting.learning_curves([1]), "must be a pandas DataFrame"),
@@ -968,7 +980,7 @@ def test_a_library_call_with_wrong_input_names_it(call, words):
 
 
 def claims_module():
-    from oapo_lite.study import claims
+    from oapo_lite.study.report import claims
 
     return claims
 
@@ -980,7 +992,7 @@ def _two_curves(b_seed: int = 0) -> pd.DataFrame:
 
 
 def test_markdown_keeps_a_cell_with_a_line_break_on_its_row():
-    from oapo_lite.study import claims
+    from oapo_lite.study.report import claims
 
     text = claims.markdown(pd.DataFrame({"a": ["one\ntwo", "x|y"]}))
     assert text.splitlines()[2:] == ["| one two |", "| x\\|y |"]

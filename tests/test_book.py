@@ -42,7 +42,7 @@ def site():
         if os.environ.get("CI"):
             pytest.fail(f"the book test must run in CI: {reason}")
         pytest.skip(reason)
-    from oapo_lite.study.book import build
+    from oapo_lite.study.report.book import build
 
     with tempfile.TemporaryDirectory() as tmp:
         index = build(Path(tmp) / "book")
@@ -81,7 +81,7 @@ def _pages(root: Path) -> list[str]:
 
 def test_every_notebook_has_a_page_and_the_front_page_links_them(site):
     root, _ = site
-    from oapo_lite.study.reproduce import notebook_paths
+    from oapo_lite.study.runs.reproduce import notebook_paths
 
     stems = [p.stem for p in notebook_paths()]
     assert sorted(p.stem for p in (root / "notebooks").glob("*.html")) == stems
@@ -115,7 +115,7 @@ return [spans.length, spans.filter(s => s.querySelector('mjx-container')).length
 
 def test_every_page_loads_cleanly_with_its_images_and_typeset_math(site, browser):
     root, url = site
-    from oapo_lite.study.reproduce import notebook_paths
+    from oapo_lite.study.runs.reproduce import notebook_paths
 
     has_math = {p.stem for p in notebook_paths()
                 if any("$" in c.source for c in nbformat.read(p, 4).cells if c.cell_type == "markdown")}
@@ -148,7 +148,7 @@ def test_every_page_loads_cleanly_with_its_images_and_typeset_math(site, browser
 def test_notebook_text_has_no_control_characters():
     """A control character in a markdown cell is a LaTeX command eaten by a Python string
     escape (\\frac -> form feed + "rac"); MathJax may still typeset what is left, wrongly."""
-    from oapo_lite.study.reproduce import notebook_paths
+    from oapo_lite.study.runs.reproduce import notebook_paths
 
     for path in notebook_paths():
         for k, cell in enumerate(nbformat.read(path, as_version=4).cells):

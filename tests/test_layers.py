@@ -1,5 +1,7 @@
-"""The package's layers, read from its imports: study -> neural / tabular -> shared parts, no
-module importing from a layer above its own (nor neural <-> tabular), and no import cycle."""
+"""The package's layers, read from its imports: study -> neural / tabular -> shared parts -> envs,
+no module importing from a layer above its own (nor neural <-> tabular); inside study, its rooms
+in the order data flows (catalogue -> runs -> judge -> studies -> report), each importing only
+from rooms before it; and no import cycle."""
 import ast
 import shutil
 from pathlib import Path
@@ -7,9 +9,12 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "oapo_lite"
-# a layer may import from the layers ranked below it; the shared parts are everything outside
-# the three folders (envs/, algorithms, reuse, store, cli); __main__ is the command line on top
-RANK = {"__main__": 3, "study": 2, "neural": 1, "tabular": 1, "shared": 0}
+# a layer may import from the layers ranked below it; the shared parts are algorithms, reuse,
+# store and cli, above envs/ (every engine behind one interface), above renamed (retired keywords,
+# which every layer may use); __main__ is the command line on top
+RANK = {"__main__": 5, "study": 4, "neural": 3, "tabular": 3, "shared": 2, "envs": 1, "renamed": 0}
+# the rooms of study/, in the order data flows: a room imports only from itself and the rooms before it
+ROOMS = ("catalogue", "runs", "judge", "studies", "report")
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -20,6 +25,12 @@ def module_name(path: Path, root: Path) -> str:
 def layer(module: str) -> str:
     part = module.split(".")[1] if "." in module else ""
     return part if part in RANK else "shared"
+
+
+def room(module: str) -> str | None:
+    """The room of a study module (None: not in one, e.g. ``oapo_lite.study`` itself)."""
+    parts = module.split(".")
+    return parts[2] if len(parts) > 2 and parts[1] == "study" and parts[2] in ROOMS else None
 
 
 def imports(path: Path, root: Path, modules: set[str]) -> set[str]:
@@ -51,9 +62,13 @@ def graph(root: Path = PACKAGE) -> dict[str, set[str]]:
 
 
 def violations(g: dict[str, set[str]]) -> list[str]:
-    """Every import of a module from a layer above its own, or beside it (neural <-> tabular)."""
-    return sorted(f"{m} ({layer(m)}) imports {d} ({layer(d)})" for m, deps in g.items() for d in deps
-                  if layer(d) != layer(m) and RANK[layer(d)] >= RANK[layer(m)])
+    """Every import of a module from a layer above its own, or beside it (neural <-> tabular), and
+    every import of a study room from a room after its own."""
+    across = [f"{m} ({layer(m)}) imports {d} ({layer(d)})" for m, deps in g.items() for d in deps
+              if layer(d) != layer(m) and RANK[layer(d)] >= RANK[layer(m)]]
+    upstream = [f"{m} ({room(m)}) imports {d} ({room(d)})" for m, deps in g.items() for d in deps
+                if room(m) and room(d) and ROOMS.index(room(d)) > ROOMS.index(room(m))]
+    return sorted(across + upstream)
 
 
 def cycles(g: dict[str, set[str]]) -> list[list[str]]:
@@ -93,9 +108,13 @@ def test_no_module_imports_itself_back_through_others():
 
 
 def test_the_shared_parts_outside_the_layer_folders_are_few():
-    top = {m for m in graph() if layer(m) == "shared" and m.count(".") == 1}
-    assert top == {"oapo_lite.algorithms", "oapo_lite.cli", "oapo_lite.envs", "oapo_lite.renamed", "oapo_lite.reuse",
-                   "oapo_lite.store"}
+    top = {m for m in graph() if layer(m) in ("shared", "renamed") and m.count(".") == 1}
+    assert top == {"oapo_lite.algorithms", "oapo_lite.cli", "oapo_lite.renamed", "oapo_lite.reuse", "oapo_lite.store"}
+
+
+def test_every_study_module_sits_in_a_room():
+    loose = {m for m in graph() if layer(m) == "study" and room(m) is None} - {"oapo_lite.study"}
+    assert not loose
 
 
 def test_the_train_command_reaches_no_study_module():
@@ -113,12 +132,18 @@ def test_the_train_command_reaches_no_study_module():
 
 
 @pytest.mark.parametrize("where, line, words", [
-    ("neural/nets.py", "from oapo_lite.study import grid", "oapo_lite.neural.nets (neural) imports oapo_lite.study.grid (study)"),
+    ("neural/nets.py", "from oapo_lite.study.catalogue import grid",
+     "oapo_lite.neural.nets (neural) imports oapo_lite.study.catalogue.grid (study)"),
     ("reuse.py", "from oapo_lite.neural.config import TrainConfig",
      "oapo_lite.reuse (shared) imports oapo_lite.neural.config (neural)"),
     ("tabular/exact.py", "from oapo_lite.neural import nets",
      "oapo_lite.tabular.exact (tabular) imports oapo_lite.neural.nets (neural)"),
     ("envs/maps.py", "from .core import VecMaze", None),  # a cycle: core imports maps
+    ("envs/core.py", "from oapo_lite.store import write_frame", "oapo_lite.envs.core (envs) imports oapo_lite.store (shared)"),
+    ("study/catalogue/grid.py", "from oapo_lite.study.judge import evidence",
+     "oapo_lite.study.catalogue.grid (catalogue) imports oapo_lite.study.judge.evidence (judge)"),
+    ("study/judge/verdicts.py", "from oapo_lite.study.report import words",
+     "oapo_lite.study.judge.verdicts (judge) imports oapo_lite.study.report.words (report)"),
 ])
 def test_an_import_upwards_or_round_fails_the_check(tmp_path, where, line, words):
     """The checks catch what they are for: a copy of the package with one import added."""

@@ -10,7 +10,8 @@ import nbformat
 import pytest
 import torch
 
-from oapo_lite.study import figures, quoted
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.report import quoted
 
 import numeric_paths
 
@@ -104,7 +105,7 @@ def typed_budget_errors(notebook: Path) -> list[str]:
     the paper's count), and "X% of HARL's YM" that is no env's share of a figure's steps."""
     import re
 
-    from oapo_lite.study import experiments
+    from oapo_lite.study.runs import experiments
 
     figs = [f for f in figures.GRID if f.notebook == notebook.stem]
     seeds, shares = set(), set()

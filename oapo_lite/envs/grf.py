@@ -266,5 +266,8 @@ def agent_types(name: str) -> tuple[str, ...]:
     return tuple(f"player_{k}" for k in range(SCENARIOS[name]))
 
 
+agent_names = agent_types  # a controlled player's name is its type: GRF's players are told apart by place
+
+
 def make_vec(name: str, n_envs: int, seed: int, max_steps: int) -> GRFVec:
     return GRFVec(name, n_envs, seed, max_steps)

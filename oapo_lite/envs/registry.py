@@ -76,3 +76,13 @@ def agent_types(spec: str, max_steps: int) -> tuple[str, ...]:
     if engine is not None and hasattr(engine, "agent_types"):
         return engine.agent_types(name)
     return make_vec(spec, 1, 0, max_steps).agent_types
+
+
+def agent_names(spec: str, max_steps: int) -> tuple[str, ...]:
+    """The name of each seat of ``spec`` (``env.agents``), from the engine where it can tell
+    without building (GRF: its players), else from a one-copy env."""
+    prefix, name = split(spec)
+    engine = None if prefix is None else _engine(prefix)
+    if engine is not None and hasattr(engine, "agent_names"):
+        return engine.agent_names(name)
+    return tuple(make_vec(spec, 1, 0, max_steps).agents)

@@ -80,6 +80,9 @@ COLUMNS = {
     "agreement": Column("adaptive reuse: each source's gradient agreement with the learner's own (inf: itself)",
                         empty=FIRST, shape="matrix", infinite=True),
     "seps_groups": Column("SePS: its groups of seats", empty="before its groups are chosen", shape="text"),
+    "owner": Column("the network of each seat (what the seats' reuse across networks is read against)", 0,
+                    integer=True, shape="vector"),
+    "agent_types": Column("each seat's agent type, as a JSON list", shape="text"),
     "cpu_s": Column("CPU seconds the run has cost so far (every thread; an engine's worker processes)", 0,
                     empty=UNMEASURED),
     "wall_s": Column("wall seconds the run has taken so far", 0, empty=UNMEASURED),
@@ -87,6 +90,8 @@ COLUMNS = {
     "cpu_count": Column("its logical cores", 1, integer=True, empty=UNMEASURED),
 }
 COST = ("cpu_s", "wall_s", "cpu_model", "cpu_count")  # what a run cost: no number of its learning
+# what a run was, read by the study instead of the installed engines: no number of its learning
+STRUCTURE = ("owner", "agent_types")
 RETIRED = ("shared",)  # config fields since retired: older run files keep their columns, always empty
 
 

@@ -4,6 +4,7 @@ that carries over (env, actors, learner, generators, history, evaluation rows); 
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import pickle
 import subprocess
@@ -11,6 +12,7 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import torch
 
@@ -22,6 +24,7 @@ from oapo_lite.neural.nets import Actors, owners
 from oapo_lite.neural.normalize import Moments, Normalized
 from oapo_lite.neural.ppo_family import PPOFamilyLearner
 from oapo_lite.neural.rollout import make_env
+from oapo_lite.neural.seps import group_labels
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
@@ -121,7 +124,17 @@ class RunState:
             detail = " ".join(str(err).split())[:160]
             raise DamagedFile(f"{name} does not fit this run ({type(err).__name__}: {detail}); {START_AFRESH}") from None
         config = self.cfg.flat()
-        self.rows = [{**r, **config} for r in ck["rows"] if self.cfg.evaluates(r["iteration"])]
+        self.rows = [{**r, **config, **(self.structure(r) if "owner" not in r else {})} for r in ck["rows"]
+                     if self.cfg.evaluates(r["iteration"])]
+
+    def structure(self, row: dict | None = None) -> dict:
+        """What the run is (``results.STRUCTURE``): the seats' networks now, or those of a checkpoint's
+        ``row`` written before the rows recorded them (SePS regroups once: a row names its groups)."""
+        owner = self.owner
+        if row is not None and self.cfg.algo == "seps":
+            groups = row.get("seps_groups")
+            owner = group_labels(groups, self.env.agents) if isinstance(groups, str) else [0] * len(owner)
+        return {"owner": np.array(owner), "agent_types": json.dumps(list(self.env.agent_types))}
 
     def save(self, out: Path) -> None:
         """``results.csv`` and ``checkpoint.pt``, each written atomically."""

@@ -136,6 +136,12 @@ def group_names(labels, agents) -> str:
     return " | ".join("+".join(a for a, c in zip(agents, labels) if c == g) for g in range(labels.max() + 1))
 
 
+def group_labels(names: str, agents) -> list[int]:
+    """``group_names`` read back: the group of every agent, groups numbered in the order named."""
+    group = {a: g for g, members in enumerate(names.split(" | ")) for a in members.split("+")}
+    return [group[a] for a in agents]
+
+
 class Buffer:
     """The pre-training transitions (o, a, o', r, agent id), only where the agent acted."""
 

@@ -127,7 +127,8 @@ def evaluation_row(state: RunState, metrics: dict, revision: str) -> dict:
     ret, success = episode_scores(state.actors, state.owner, state.eval_env, gen, cfg.max_steps)
     return {**cfg.flat(), "git_rev": revision, "iteration": it, "step": it * cfg.iteration_steps,
             "eval_return": ret, "frac_opt": ret / state.env.optimum, "eval_success": success, **metrics,
-            **({"iterations_reusing": iterations_reusing(state.history)} if "peer_share" in metrics else {})}
+            **({"iterations_reusing": iterations_reusing(state.history)} if "peer_share" in metrics else {}),
+            **state.structure()}
 
 
 UNMEASURED = {"cpu_s": np.nan, "wall_s": np.nan, "cpu_model": np.nan, "cpu_count": np.nan}

@@ -15,7 +15,7 @@ from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.nets import Actors
 from oapo_lite.neural.rollout import episode_scores
 from oapo_lite.neural.train import train
-from oapo_lite.study import figures, grid
+from oapo_lite.study.catalogue import figures, grid
 
 SCENARIO = "academy_3_vs_1_with_keeper"
 needs_grf = pytest.mark.skipif(not grf.installed() and not os.environ.get("CI"),

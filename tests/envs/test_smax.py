@@ -113,7 +113,7 @@ def test_oappo_trains_end_to_end_and_resumes_identically(env, tmp_path):
 def test_the_tuned_settings_fit_every_algorithm_and_resume_identically(env, tmp_path):
     """``figures.smax.SMAX_TUNED`` (Fig. 4's settings on every map) is a valid config for every
     algorithm of Fig. 4, and a MAPPO run with it (4 minibatches) resumes to the same numbers."""
-    from oapo_lite.study import figures
+    from oapo_lite.study.catalogue import figures
 
     for algo in figures.smax.SMAX_ALGOS:
         TrainConfig(algo=algo, env="smax:3m", **figures.smax.SMAX_BATCH, **figures.smax.SMAX_TUNED)

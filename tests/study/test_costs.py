@@ -6,7 +6,8 @@ import fakes
 
 from oapo_lite import __main__ as cli
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import costs, figures, grid
+from oapo_lite.study.catalogue import figures, grid
+from oapo_lite.study.runs import costs
 
 
 def _table(path, prices: dict) -> None:
@@ -54,7 +55,7 @@ def test_the_plan_orders_runs_as_the_driver_does_and_no_faster_than_the_cores():
 
 
 def test_the_readme_carries_the_costs_the_data_gives():
-    from oapo_lite.study import readme
+    from oapo_lite.study.runs import readme
 
     assert readme.block(costs.BEGIN, costs.END) == costs.readme_markdown(), \
-        "the README's costs are stale: run python -m oapo_lite.study.costs"
+        "the README's costs are stale: run python -m oapo_lite.study.runs.costs"

@@ -6,7 +6,8 @@ import pandas as pd
 import pytest
 
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import experiments, figures, grid
+from oapo_lite.study.catalogue import figures, grid
+from oapo_lite.study.runs import experiments
 
 import fakes
 
@@ -89,7 +90,7 @@ def test_a_budget_override_is_typed_and_names_only_fields_a_budget_has():
 
 
 def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recovers(tmp_path, monkeypatch, capsys):
-    from oapo_lite.study import executors, reproduce
+    from oapo_lite.study.runs import executors, reproduce
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     (cfg,) = [cfg for _, cfg in figures.figure_runs("fig1", "smoke")]
@@ -111,7 +112,7 @@ def test_a_failed_run_makes_reproduce_exit_non_zero_naming_it_and_a_rerun_recove
 
 
 def test_bad_executor_options_name_what_is_allowed(capsys):
-    from oapo_lite.study import reproduce
+    from oapo_lite.study.runs import reproduce
 
     for argv, message in ((["--figures", "fig9"], "unknown figure 'fig9'"),
                           (["--address", "auto"], "needs --executor ray"),
@@ -179,7 +180,7 @@ def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
 
 
 def test_train_runs_trains_what_is_missing_and_names_failures(tmp_path, monkeypatch):
-    from oapo_lite.study import executors
+    from oapo_lite.study.runs import executors
 
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     experiments.train_runs("smoke", ["fig1"], workers=1)

@@ -1,7 +1,7 @@
 import numpy as np
 import pandas as pd
 
-from oapo_lite.study import gate_study
+from oapo_lite.study.studies import gate_study
 
 
 def _rows(env: str, values: dict, same_kind=(True, False), gap: dict | None = None) -> list[dict]:

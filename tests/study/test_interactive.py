@@ -1,4 +1,4 @@
-"""oapo_lite.study.interactive: sliders with ipywidgets, one static drawing without it."""
+"""oapo_lite.study.report.interactive: sliders with ipywidgets, one static drawing without it."""
 import json
 import sys
 import warnings
@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from oapo_lite.study import interactive
+from oapo_lite.study.report import interactive
 
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"
 RANGES = dict(sigma=[0.01, 0.1, 1.0, 10.0], reuse_lambda=(0.2, 1.0, 0.1), n=(1, 5))
@@ -95,7 +95,7 @@ def test_notebook_05_slider_cell_draws_statically(monkeypatch):
     import matplotlib.pyplot as plt
 
     from oapo_lite import reuse
-    from oapo_lite.study.plotting import reuse_heatmap
+    from oapo_lite.study.report.plotting import reuse_heatmap
 
     nb = json.loads((NOTEBOOKS / "05_oatrpo_oappo_eq7_9.ipynb").read_text())
     cells = [c for c in nb["cells"] if "interactive.sliders(" in "".join(c["source"])]

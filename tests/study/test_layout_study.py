@@ -3,26 +3,28 @@ import numpy as np
 import pytest
 
 from oapo_lite.envs.layouts import LAYOUTS
-from oapo_lite.study import figures, layout_study
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue.figures import layouts
+from oapo_lite.study.studies import layout_study
 
 import fakes
 
 
 def test_grid_has_every_curve_on_every_layout_once():
-    runs = layout_study.study_runs("paper")
+    runs = layouts.study_runs("paper")
     assert len(runs) == len(LAYOUTS) * 7 * 5  # 7 curves, 5 seeds
     assert len({cfg.run_id() for *_, cfg in runs}) == len(runs)
     by_label = {label: cfg for _, label, cfg in runs}
     assert {c.reuse_lambda for c in by_label.values() if c.algo == "oappo"} == set(figures.mazes.LAMBDAS)
     assert by_label["happo"].algo == "happo" and by_label["mappo"].algo == "mappo"
-    assert by_label[layout_study.ADAPTIVE].reuse_adapt == "gradient_test"
+    assert by_label[layouts.ADAPTIVE].reuse_adapt == "gradient_test"
     assert sum(c.reuse_adapt is not None for c in by_label.values()) == 1
     assert all(cfg.env == f"layout:{name}" for name, _, cfg in runs)
 
 
 def test_unknown_layout_and_missing_runs_raise(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="unknown layouts \\['nowhere'\\]"):
-        layout_study.study_runs("smoke", ["nowhere"])
+        layouts.study_runs("smoke", ["nowhere"])
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     with pytest.raises(FileNotFoundError, match="is not on disk"):
         layout_study.load("smoke")
@@ -33,8 +35,8 @@ def test_tables_read_the_runs(tmp_path, monkeypatch):
     # at 48k, lambda = 0.2 stays at 20% of it, every other curve reaches it at 64k
     monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
     name = sorted(LAYOUTS)[0]
-    reach = {"oappo": 32_000, layout_study.ADAPTIVE: 48_000}
-    for _, label, cfg in layout_study.study_runs("paper", [name]):
+    reach = {"oappo": 32_000, layouts.ADAPTIVE: 48_000}
+    for _, label, cfg in layouts.study_runs("paper", [name]):
         fakes.write_run(cfg, "paper", lambda steps: np.minimum(steps / reach.get(label, 64_000), 1.0)
                         * (0.2 if label == "oappo lambda=0.2" else 1.0))
     df = layout_study.load("paper", [name])

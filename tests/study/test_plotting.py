@@ -2,7 +2,8 @@
 import pytest
 
 from oapo_lite.envs import render
-from oapo_lite.study import figures, palette, plotting
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.report import palette, plotting
 
 
 def test_split_outcomes_are_drawn_by_a_level_some_seed_reached_with_every_seed_on_top():
@@ -53,7 +54,7 @@ def test_no_notebook_picks_a_colour_of_its_own():
 
     import nbformat
 
-    from oapo_lite.study.reproduce import NOTEBOOKS
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
 
     own = re.compile(r"plt\.cm\.|color=\"#|color=\"(tab|C)\d|ALGO_COLORS|sweep_colors")  # an image may take a cmap
     for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):

@@ -17,14 +17,15 @@ import pandas as pd
 import pytest
 
 from oapo_lite.neural.results import learning
-from oapo_lite.study import experiments, figures
-from oapo_lite.study.grid import Figure
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.catalogue.grid import Figure
 
 # The head node lives in its own process (so that other drivers, including a killed one, come
 # and go); it stops when the test closes its stdin.
 HEAD = """
 import sys
-from oapo_lite.study.executors import connect
+from oapo_lite.study.runs.executors import connect
 ray, _ = connect(None, num_cpus=2, _temp_dir=sys.argv[1], object_store_memory=100 * 2**20)
 print(ray.get_runtime_context().gcs_address, flush=True)
 sys.stdin.read()

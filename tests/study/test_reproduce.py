@@ -3,8 +3,9 @@ cell is reported with its notebook and its cell."""
 import nbformat
 import pytest
 
-from oapo_lite.study import figures, reproduce
-from oapo_lite.study.reproduce import NotebookFailed, run_notebook
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.runs import reproduce
+from oapo_lite.study.runs.reproduce import NotebookFailed, run_notebook
 
 
 def _notebook(tmp_path, name: str, *sources: str):

@@ -5,7 +5,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from oapo_lite.study import figures, selection
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.studies import selection
 
 
 @pytest.mark.parametrize("env, reading", list(figures.SELECTION_SIGMA))
@@ -56,8 +57,7 @@ def test_the_ablation_pairs_its_curves_on_seeds_that_chose_no_setting():
 def test_gate_use_counts_the_across_network_pairs_open_and_shut():
     k = [[0.0, 0.01, 0.2], [0.03, 0.0, 0.05], [0.5, 0.02, 0.0]]
     df = pd.DataFrame({"env": ["black_blue_red"] * 2, "label": ["x"] * 2, "kl_matrix": [np.nan, np.array(k)],
-                       "networks": ["agent"] * 2, "max_steps": [50] * 2, "sigma": [0.04] * 2,
-                       "across_share": [np.nan, 0.2]})
+                       "owner": [np.arange(3)] * 2, "sigma": [0.04] * 2, "across_share": [np.nan, 0.2]})
     use = selection.gate_use(df, {})
     # 6 ordered pairs of the 3 seats: 0.01, 0.2, 0.03, 0.05, 0.5, 0.02; within 0.04: three
     assert use.loc[0, ["pair-iterations", "open", "shut", "across_share"]].tolist() == [6, 0.5, 0.5, 0.2]
@@ -82,16 +82,22 @@ def test_estimators_pairs_the_seeds_counts_reuse_and_prices_each_curve_from_its_
         for label, final, cpu, m in (("oappo gated", w, 3.0 + seed, reuse), ("oappo gated sampled", s, 1.0, alone),
                                      ("happo", 0.0, 2.0, alone)):
             rows += [{"env": "smax:2s3z", "label": label, "seed": seed, "step": 1000 * k, "eval_success": final,
-                      "cpu_s": cpu * k, "reuse_matrix": m} for k in range(1, 4)]
+                      "cpu_s": cpu * k, "reuse_matrix": m, "owner": np.arange(2)} for k in range(1, 4)]
     out = selection.estimators(pd.DataFrame(rows), "fig_selection_smax").iloc[0]
     assert (out["sampled"], out["weights"], out["pairs"], out["sampled higher"]) == \
         ("oappo gated sampled", "oappo gated", 3, 2)
-    assert out["sampled minus weights"] == pytest.approx((0.1 + 0.0 + 0.2) / 3)
+    assert out["sampled minus weights"] == pytest.approx((0.1 + 0.0 + 0.2) / 3)  # the IQM of three: their mean
     assert out["low"] <= out["sampled minus weights"] <= out["high"]
     # every evaluation of the weights curve gave the peer weight, none of the sampled one's
     assert (out["reused weights"], out["reused sampled"]) == (1.0, 0.0)
     # CPU seconds per 1,000 steps: the median over seeds of the last row's cpu_s / step
     assert out[["CPU-s happo", "CPU-s weights", "CPU-s sampled"]].tolist() == pytest.approx([2.0, 4.0, 1.0])
-    line = selection.estimator_sentence(out, "fig_selection_smax")
-    assert "the sampled curve reused at below 25%, so the pair compares no estimator of reuse" in line
-    assert "0.50x HAPPO's sampled, 2.00x with the weights" in line
+
+
+def test_cpu_to_level_reads_the_runs_own_records_where_the_curves_iqm_first_gets_there():
+    rows = [{"label": "a", "seed": seed, "step": k, "eval_success": min(1.0, k * rate), "cpu_s": 10.0 * k * (seed + 1)}
+            for seed, rate in enumerate((0.5, 0.25, 0.2)) for k in range(5)]
+    cpu = selection.cpu_to_level(pd.DataFrame(rows), figures.smax.SPEED_WIN_RATE, 0.5)
+    # win rates per step: k=1 (0.5, 0.25, 0.2): IQM of three is their mean, 0.317; k=2 (1, 0.5, 0.4): 0.633
+    assert cpu["a"] == pytest.approx(np.median([20.0, 40.0, 60.0]))
+    assert np.isnan(selection.cpu_to_level(pd.DataFrame(rows), figures.smax.SPEED_WIN_RATE, 2.0)["a"])

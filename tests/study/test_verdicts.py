@@ -4,8 +4,18 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from oapo_lite.study import figures, statistics, tables, verdicts as v
-from oapo_lite.study.claims import judge
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue.metrics import RETURN, WIN_RATE
+from oapo_lite.study.catalogue.tests import Claim
+from oapo_lite.study.judge import evidence as ev_, statistics, verdicts as v
+from oapo_lite.study.judge.records import Status
+from oapo_lite.study.report import words
+from oapo_lite.study.studies import tables
+
+judge = v.judge
+REPRODUCED, WITHIN_NOISE, NOT, CONTRADICTED = Status.REPRODUCED, Status.WITHIN_NOISE, Status.NOT, Status.CONTRADICTED
+NOT_TESTABLE, NOT_RUN, NOT_REUSE, SHARING, SWITCH = (Status.NOT_TESTABLE, Status.NOT_RUN, Status.NOT_REUSE,
+                                                     Status.SHARING, Status.SWITCH)
 
 
 def curves(spec, seeds=5, steps=np.arange(0, 100_001, 5_000), noise=0.0):
@@ -21,7 +31,12 @@ def curves(spec, seeds=5, steps=np.arange(0, 100_001, 5_000), noise=0.0):
 
 
 def evidence(spec, **kw):
-    return v.Evidence(curves(spec, **kw))
+    return ev_.Evidence(curves(spec, **kw))
+
+
+def check(ev, test, curves_, text="x"):
+    """``test`` on ``curves_`` judged on ``ev``."""
+    return v.check(ev, Claim(text, test, tuple(curves_)))
 
 
 # --- the statistics against hand computations ---------------------------------------------
@@ -100,7 +115,7 @@ def test_bad_confidence_statistic_and_label_raise():
 
 def test_per_run_steps_and_censoring():
     df = curves({"a": (40_000, 1.0), "b": (40_000, 0.5)}, seeds=1)
-    runs = v.per_run(df).set_index("label")
+    runs = ev_.per_run(df).set_index("label")
     assert runs.loc["a", "steps_to_threshold"] == 40_000  # first grid point with 40k/40k >= 0.95
     assert runs.loc["a", "reached"] and not runs.loc["b", "reached"]
     assert runs.loc["b", "steps_to_threshold"] == 100_000  # censored at the last step
@@ -109,8 +124,8 @@ def test_per_run_steps_and_censoring():
 
 def test_intervals_table_matches_per_run_values():
     df = curves({"fast": (20_000, 1.0), "low": (20_000, 0.5)}, noise=0.05)
-    table = v.intervals(df)
-    runs = v.per_run(df)
+    table = ev_.intervals(df)
+    runs = ev_.per_run(df)
     fast = runs.loc[runs["label"] == "fast", "steps_to_threshold"]
     assert table.loc["fast", "steps_iqm"] == pytest.approx(stats.trim_mean(fast, 0.25))
     assert table.loc["low", ["final_iqm", "final_low", "final_high"]].tolist() == pytest.approx([0.5] * 3)
@@ -119,41 +134,42 @@ def test_intervals_table_matches_per_run_values():
 
 def test_faster_and_higher_directions():
     ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0), "low": (20_000, 0.5)}, noise=0.05)
-    assert v.faster(ev, "fast", "slow", "x").status == v.REPRODUCED
-    assert v.faster(ev, "slow", "fast", "x").status == v.CONTRADICTED  # the whole interval says the opposite
-    assert v.higher(ev, "fast", "low", "x").status == v.REPRODUCED
-    assert v.higher(ev, "low", "fast", "x").status == v.CONTRADICTED
-    assert v.faster(ev, "fast", "slow", "x").estimate == "P(fast faster) 1.000 [1.000, 1.000]"
+    assert check(ev, "faster", ("fast", "slow")).status == REPRODUCED
+    assert check(ev, "faster", ("slow", "fast")).status == CONTRADICTED  # the whole interval says the opposite
+    assert check(ev, "higher", ("fast", "low")).status == REPRODUCED
+    assert check(ev, "higher", ("low", "fast")).status == CONTRADICTED
+    assert words.lead_estimate(check(ev, "faster", ("fast", "slow"))) == "P(fast faster) 1.000 [1.000, 1.000]"
 
 
-def test_within_noise_is_direction_only():
+def test_within_noise_is_the_point_estimate_alone():
     ev = evidence({"a": (50_000, 1.0), "b": (51_000, 1.0)}, noise=0.3)
-    verdict = v.faster(ev, "a", "b", "a faster")
-    assert verdict.status in (v.WITHIN_NOISE, v.NOT) and not verdict.held
+    verdict = check(ev, "faster", ("a", "b"))
+    assert verdict.status in (WITHIN_NOISE, NOT) and not verdict.held
 
 
 def test_better_uses_final_then_speed():
     ev = evidence({"hi": (80_000, 1.0), "lo": (10_000, 0.6), "twin": (20_000, 1.0)})
-    assert v.better(ev, "hi", "lo", "x").held  # higher plateau wins despite being slower
-    assert not v.better(ev, "lo", "hi", "x").held
-    assert v.better(ev, "twin", "hi", "x").held  # same plateau: decided by speed
-    assert v.better(ev, "twin", "hi", "x").estimate.startswith("P(twin faster)")
+    assert check(ev, "better", ("hi", "lo")).held  # higher plateau wins despite being slower
+    assert not check(ev, "better", ("lo", "hi")).held
+    tie = check(ev, "better", ("twin", "hi"))
+    assert tie.held and tie.by_speed  # same plateau: decided by speed
+    assert words.lead_estimate(tie).startswith("P(twin faster)") and "so speed decides" in words.reason(tie)
 
 
 def test_stuck_and_optimal():
     ev = evidence({"stuck": (10_000, 0.5), "ok": (10_000, 1.0)})
-    assert v.stuck(ev, "stuck", "x").held and not v.stuck(ev, "ok", "x").held
-    assert v.optimal(ev, "ok", "x").held and not v.optimal(ev, "stuck", "x").held
+    assert check(ev, "stuck", ("stuck",)).held and not check(ev, "stuck", ("ok",)).held
+    assert check(ev, "optimal", ("ok",)).held and not check(ev, "optimal", ("stuck",)).held
 
 
-def test_stuck_with_some_seeds_escaping_is_direction_only():
+def test_stuck_with_some_seeds_escaping_is_within_noise():
     # 3 seeds stuck at half the optimum, 2 reach it: IQM (0.5 + 0.5 + 1) / 3 < 0.95, but
     # resamples with 4 or 5 escaping seeds (probability 0.087 > 2.5%) put the interval above.
     df = pd.concat([curves({"a": (10_000, 0.5)}, seeds=3),
                     curves({"a": (10_000, 1.0)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)])
-    verdict = v.stuck(v.Evidence(df), "a", "x")
-    assert verdict.status == v.WITHIN_NOISE
-    assert verdict.estimate.startswith("IQM final 0.667 [")
+    verdict = check(ev_.Evidence(df), "stuck", ("a",))
+    assert verdict.status == WITHIN_NOISE
+    assert words.lead_estimate(verdict).startswith("IQM final 0.667 [")
 
 
 def test_figure_claims_follow_the_data():
@@ -162,27 +178,17 @@ def test_figure_claims_follow_the_data():
     assert all(x.held for x in judge("fig3b", good))
     bad = curves({"mappo": (20_000, 1.0), "happo": (30_000, 1.0), "oappo": (50_000, 1.0),
                   "oatrpo": (90_000, 1.0)})
-    held = {x.claim: x.held for x in judge("fig3b", bad)}
+    held = {x.claim.text: x.held for x in judge("fig3b", bad)}
     assert not held["MAPPO (shared parameters) stays below the optimum"]
     assert not held["OATRPO converges faster than OAPPO"]
-    sentence = judge("fig3b", bad)[0].sentence()
+    sentence = words.sentence(judge("fig3b", bad)[0])
     assert "contradicted" in sentence and "mappo 1.000 [1.000, 1.000]" in sentence
 
 
-def test_claim_table_has_a_row_per_budget_and_claim():
-    good = curves({"mappo": (20_000, 0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0),
-                   "oatrpo": (30_000, 1.0), "hatrpo": (60_000, 1.0)})
-    table = v.claim_table({"five": judge("fig3b", good), "one": judge("fig3b", good[good["seed"] == 0])})
-    assert len(table) == 2 * len(figures.get_figure("fig3b").claims)
-    by = table.set_index("budget")
-    assert (by.loc["five", "verdict"] == v.REPRODUCED).all()
-    assert (by.loc["one", "verdict"] == v.NOT_TESTABLE).all()  # one seed cannot decide anything
-
-
-def test_one_seed_is_never_more_than_direction():
+def test_one_seed_is_never_more_than_the_point_estimate():
     ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, seeds=1)
-    verdict = v.faster(ev, "fast", "slow", "x")
-    assert verdict.status == v.WITHIN_NOISE
+    assert v.ESTIMATORS["improvement"](ev, Claim("x", "faster", ("fast", "slow"))).status == WITHIN_NOISE
+    assert check(ev, "faster", ("fast", "slow")).status == NOT_TESTABLE  # fewer than 2 seeds: step 1
 
 
 def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
@@ -190,29 +196,31 @@ def test_speed_reads_censored_times_alone_and_reliability_is_its_own_question():
     a = curves({"a": (20_000, 1.0)}, seeds=3)
     a_stuck = curves({"a": (20_000, 0.5)}, seeds=2).assign(seed=lambda d: d["seed"] + 3)
     b = curves({"b": (70_000, 1.0)})
-    ev = v.Evidence(pd.concat([a, a_stuck, b]))
+    ev = ev_.Evidence(pd.concat([a, a_stuck, b]))
     s = ev.summary
     assert s.loc["a", "reached"] == 3 and s.loc["a", "steps_mean"] < s.loc["b", "steps_mean"]
     # a censored seed ranks behind every seed that got there: P = (3 x 5 wins) / 25 pairs
-    verdict = v.faster(ev, "a", "b", "a faster")
-    assert verdict.estimate.startswith("P(a faster) 0.600 ") and verdict.status == v.WITHIN_NOISE
-    assert "3/5 seeds reached" in verdict.evidence
-    # "as reliably": 3/5 against 5/5, a difference of -0.4 whose interval reaches 0 (a resample of
-    # a's seeds can draw only its converged ones): not reproduced; a tie holds
-    late = v.reliable(ev, "a", "b", "a as reliably as b")
-    assert late.status == v.NOT and late.estimate.startswith("share reached, a minus b: -0.400 [")
-    assert v.reliable(ev, "b", "b", "b as reliably as b").status == v.REPRODUCED
-    # never reaching against always reaching: the whole interval below 0
+    verdict = check(ev, "faster", ("a", "b"))
+    assert words.lead_estimate(verdict).startswith("P(a faster) 0.600 ") and verdict.status == WITHIN_NOISE
+    assert "3/5 seeds reached" in words.evidence(verdict)
+    # "as reliably": 3/5 against 5/5, a difference of -0.4 whose interval reaches 0: not reproduced; a tie holds
+    late = check(ev, "reliable", ("a", "b"))
+    assert late.status == NOT and words.lead_estimate(late).startswith("share reached, a minus b: -0.400 [")
+    assert check(ev, "reliable", ("b", "b")).status == REPRODUCED
     never = pd.concat([curves({"a": (20_000, 0.5)}, seeds=8), curves({"b": (70_000, 1.0)}, seeds=8)])
-    assert v.reliable(v.Evidence(never), "a", "b", "x").status == v.CONTRADICTED
+    assert check(ev_.Evidence(never), "reliable", ("a", "b")).status == CONTRADICTED
     # with no seed of either curve there, neither question can be asked
-    nowhere = curves({"a": (20_000, 0.5), "b": (20_000, 0.6)})
-    assert v.check(v.Evidence(nowhere), v.reliable, ("a", "b"), "x").status == v.NOT_TESTABLE
+    nowhere = check(evidence({"a": (20_000, 0.5), "b": (20_000, 0.6)}), "reliable", ("a", "b"))
+    assert nowhere.status == NOT_TESTABLE and nowhere.gap.kind == "reached"
 
 
-def test_unknown_figure_raises():
+def test_unknown_figure_and_claims_that_do_not_fit_their_test_raise():
     with pytest.raises(ValueError, match="fig9"):
         judge("fig9", curves({"a": (1, 1.0)}))
+    with pytest.raises(ValueError, match="unknown test 'quicker'"):
+        Claim("x", "quicker", ("a", "b"))
+    with pytest.raises(ValueError, match="test 'selects' compares 3 curve"):
+        Claim("x", "selects", ("a", "b"))
 
 
 def win_curves(spec, seeds=5, env="smax:2s3z"):
@@ -224,45 +232,45 @@ def win_curves(spec, seeds=5, env="smax:2s3z"):
 
 def test_stabler_compares_the_largest_drop_below_an_earlier_peak():
     df = win_curves({"steady": [0, 0.3, 0.6, 0.8, 0.8], "shaky": [0, 0.6, 0.1, 0.7, 0.8]})
-    ev = v.Evidence(df, metric=v.WIN_RATE)
+    ev = ev_.Evidence(df, WIN_RATE)
     runs = ev.runs.set_index("label")
     assert runs.loc["shaky", "drawdown"].tolist() == pytest.approx([0.5] * 5)
-    assert v.stabler(ev, "steady", "shaky", "x").held
-    assert v.stabler(ev, "shaky", "steady", "x").status == v.CONTRADICTED
+    assert check(ev, "stabler", ("steady", "shaky")).held
+    assert check(ev, "stabler", ("shaky", "steady")).status == CONTRADICTED
 
 
 def test_win_rate_claims_are_not_testable_where_the_data_cannot_decide():
     learned = {"oappo": [0, 0.6, 0.9, 0.9], "mappo": [0, 0.1, 0.2, 0.3], "happo": [0, 0.1, 0.6, 0.7]}
-    out = {x.claim: x for x in judge("fig4_smax", win_curves(learned))}
+    out = {x.claim.text: x for x in judge("fig4_smax", win_curves(learned))}
     assert out["2s3z: OAPPO (a net per agent) ends above MAPPO (heterogeneous agents)"].held
     assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].held
-    assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == v.NOT_RUN  # no run on that map
-    assert out["2s3z: OAPPO (a net per type) ends above MAPPO (heterogeneous agents)"].status == v.NOT_TESTABLE
+    assert out["6h_vs_8z: OAPPO (a net per agent) ends above MAPPO"].status == NOT_RUN  # no run on that map
+    assert out["2s3z: OAPPO (a net per type) ends above MAPPO (heterogeneous agents)"].status == NOT_TESTABLE
     nothing = win_curves({k: [0, 0.0, 0.01, 0.0] for k in learned})  # peaks <= 0.05
-    assert {x.status for x in judge("fig4_smax", nothing)} == {v.NOT_TESTABLE, v.NOT_RUN}  # maps without runs: not run
-    one_seed = {x.claim: x for x in judge("fig4_smax", win_curves(learned, seeds=1))}
+    assert {x.status for x in judge("fig4_smax", nothing)} == {NOT_TESTABLE, NOT_RUN}  # maps without runs: not run
+    one_seed = {x.claim.text: x for x in judge("fig4_smax", win_curves(learned, seeds=1))}
     verdict = one_seed["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"]
-    assert verdict.status == v.NOT_TESTABLE and "fewer than 2 seeds" in verdict.reason
+    assert verdict.status == NOT_TESTABLE and "fewer than 2 seeds" in words.reason(verdict)
     never_half = win_curves({"oappo": [0, 0.2, 0.3, 0.4], "happo": [0, 0.1, 0.3, 0.3], "mappo": [0, 0.1, 0.1, 0.1]})
-    out = {x.claim: x for x in judge("fig4_smax", never_half)}
-    assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].status == v.NOT_TESTABLE
-    assert out["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"].status != v.NOT_TESTABLE
+    out = {x.claim.text: x for x in judge("fig4_smax", never_half)}
+    assert out["2s3z: OAPPO (a net per agent) converges faster than HAPPO"].status == NOT_TESTABLE
+    assert out["2s3z: OAPPO (a net per agent) ends above HAPPO (heterogeneous agents)"].status != NOT_TESTABLE
 
 
 def test_returns_figures_are_judged_on_the_return_and_absent_curves_have_no_data():
     # App. A: HAPPO plateaus at 1000, MAPPO at 400 (and OAPPO at 900); SEAC has no runs
     df = curves({"happo": (50_000, 1000.0), "mappo": (50_000, 400.0), "oappo": (50_000, 900.0)}, noise=0.1)
     df = df.rename(columns={"frac_opt": "eval_return"}).assign(frac_opt=np.nan)
-    verdicts = {x.claim: x for x in judge("figA_mamujoco", df)}
-    assert verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].held
-    assert "final evaluation return, IQM [95% CI]: happo 1000.000" in verdicts["full sharing (MAPPO) ends below no reuse (HAPPO)"].evidence
-    assert verdicts["OAPPO (a net per agent) ends above full sharing (MAPPO)"].held
-    seac = verdicts["direct reuse (SEAC) ends below no reuse (HAPPO)"]
-    assert seac.status == v.NOT_TESTABLE and "seac (0)" in seac.reason and not seac.held
+    out = {x.claim.text: x for x in judge("figA_mamujoco", df)}
+    sharing = out["full sharing (MAPPO) ends below no reuse (HAPPO)"]
+    assert sharing.held and "final evaluation return, IQM [95% CI] over seeds: happo 1000.000" in words.evidence(sharing)
+    assert out["OAPPO (a net per agent) ends above full sharing (MAPPO)"].held
+    seac = out["direct reuse (SEAC) ends below no reuse (HAPPO)"]
+    assert seac.status == NOT_TESTABLE and "seac (0)" in words.reason(seac) and not seac.held
     swapped = df.assign(label=df["label"].replace({"happo": "mappo", "mappo": "happo"}))
-    assert not {x.claim: x for x in judge("figA_mamujoco", swapped)}[
+    assert not {x.claim.text: x for x in judge("figA_mamujoco", swapped)}[
         "full sharing (MAPPO) ends below no reuse (HAPPO)"].held
-    assert all(x.status == v.NOT_RUN for x in judge("figA_mamujoco", pd.DataFrame()))
+    assert all(x.status == NOT_RUN for x in judge("figA_mamujoco", pd.DataFrame()))
 
 
 def test_grf_claims_are_judged_per_scenario_on_the_score():
@@ -271,17 +279,16 @@ def test_grf_claims_are_judged_per_scenario_on_the_score():
                                    "counterattack_easy": {"oappo": [0, 0.4, 0.8, 0.8, 0.8, 0.8],
                                                           "mappo": [0, 0.1, 0.2, 0.2, 0.2, 0.2]}}.items()
             for label, wins in spec.items() for seed in range(5) for k, w in enumerate(wins)]
-    out = {x.claim: x for x in judge("fig6b", pd.DataFrame(rows))}
+    out = {x.claim.text: x for x in judge("fig6b", pd.DataFrame(rows))}
     assert out["3_vs_1_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].held
     assert out["counterattack_easy: OAPPO ends above MAPPO"].held
-    assert "final score" in out["counterattack_easy: OAPPO ends above MAPPO"].evidence
-    # scenarios or algorithms without runs cannot be judged
-    assert out["counterattack_easy: OAPPO ends above SEAC"].status == v.NOT_TESTABLE  # no SEAC run there
-    assert out["counterattack_hard: OATRPO ends above HAPPO"].status == v.NOT_RUN  # no run of that scenario
-    assert out["pass_and_shoot_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].status == v.NOT_RUN
+    assert "final score" in words.evidence(out["counterattack_easy: OAPPO ends above MAPPO"])
+    assert out["counterattack_easy: OAPPO ends above SEAC"].status == NOT_TESTABLE  # no SEAC run there
+    assert out["counterattack_hard: OATRPO ends above HAPPO"].status == NOT_RUN  # no run of that scenario
+    assert out["pass_and_shoot_with_keeper: own experience alone (HAPPO) scores nearly perfectly"].status == NOT_RUN
 
 
-# --- the rule judges only what learned (issue 20) ------------------------------------------
+# --- the rule judges only what learned ------------------------------------------------------
 
 def _fig3b(spec, seeds=5):
     return pd.concat([curves({k: val}, seeds=seeds) if isinstance(val, tuple) else val.assign(label=k)
@@ -290,8 +297,7 @@ def _fig3b(spec, seeds=5):
 
 def flat(level, seeds=5, steps=np.arange(0, 100_001, 5_000), lucky=None):
     """A curve that never leaves ``level``; ``lucky``: (seed, step, value) of one outlier evaluation."""
-    rows = [dict(seed=s, step=t, frac_opt=level) for s in range(seeds) for t in steps]
-    df = pd.DataFrame(rows)
+    df = pd.DataFrame([dict(seed=s, step=t, frac_opt=level) for s in range(seeds) for t in steps])
     if lucky is not None:
         seed, step, value = lucky
         df.loc[(df["seed"] == seed) & (df["step"] == step), "frac_opt"] = value
@@ -300,198 +306,258 @@ def flat(level, seeds=5, steps=np.arange(0, 100_001, 5_000), lucky=None):
 
 def test_a_flat_curve_is_not_testable_and_says_which_curve():
     df = _fig3b({"mappo": flat(-0.5), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
-    out = {x.claim: x for x in judge("fig3b", df)}
+    out = {x.claim.text: x for x in judge("fig3b", df)}
     stuck = out["MAPPO (shared parameters) stays below the optimum"]
-    assert stuck.status == v.NOT_TESTABLE  # below the optimum, but because it learned nothing
-    assert "mappo did not learn (initial -0.5, final -0.5: gain +0 +- 0 s.e. over 5 seeds, not above 2 s.e.)" in stuck.reason
-    assert out["OAPPO converges faster than HAPPO"].status == v.REPRODUCED  # both learned
+    assert stuck.status == NOT_TESTABLE  # below the optimum, but because it learned nothing
+    assert ("mappo did not learn (initial -0.5, final -0.5: gain +0 +- 0 s.e. over 5 seeds, not above 2 s.e.)"
+            in words.reason(stuck))
+    assert out["OAPPO converges faster than HAPPO"].status == REPRODUCED  # both learned
 
 
 def test_one_lucky_evaluation_is_not_learning():
-    # every seed flat at -0.5 except one evaluation of one seed at the optimum, mid-run
     lucky = flat(-0.5, lucky=(2, 50_000, 1.0))
     df = _fig3b({"mappo": lucky, "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
-    ev = v.Evidence(df)
+    ev = ev_.Evidence(df)
     assert ev.runs.loc[ev.runs["label"] == "mappo", "peak"].max() == 1.0
-    assert not v.learned(ev, "mappo")
-    assert judge("fig3b", df)[0].status == v.NOT_TESTABLE
-    # one seed that ends high among flat ones: a gain within noise over seeds is not learning
+    assert not ev_.learned(ev, "mappo")
+    assert judge("fig3b", df)[0].status == NOT_TESTABLE
     one_seed = flat(-0.5)
     one_seed.loc[(one_seed["seed"] == 0) & (one_seed["step"] >= 90_000), "frac_opt"] = 1.0
-    assert not v.learned(v.Evidence(one_seed.assign(label="x")), "x")
+    assert not ev_.learned(ev_.Evidence(one_seed.assign(label="x")), "x")
 
 
 def test_win_rates_below_the_floor_did_not_learn():
-    # every seed rises, but only to a 3% win rate: below the 5% floor
-    df = win_curves({"a": [0, 0.01, 0.02, 0.02, 0.02, 0.02, 0.02]})
-    ev = v.Evidence(df, metric=v.WIN_RATE)
-    assert not v.learned(ev, "a")
-    # the reason names the test that failed, not the one that passed
-    assert v.why_not_learned(ev, "a").endswith(": final IQM 0.04, not above the floor 0.05)")
+    ev = ev_.Evidence(win_curves({"a": [0, 0.01, 0.02, 0.02, 0.02, 0.02, 0.02]}), WIN_RATE)
+    why = ev_.not_learned(ev, "a")
+    assert why.failures == ("floor",)  # the reason names the test that failed, not the one that passed
+    assert words.not_learned(why).endswith(": final IQM 0.04, not above the floor 0.05)")
 
 
 def test_two_learned_curves_with_p_above_one_half_are_reproduced():
     ev = evidence({"fast": (20_000, 1.0), "slow": (80_000, 1.0)}, noise=0.05)
-    assert v.learned(ev, "fast") and v.learned(ev, "slow")
-    verdict = v.faster(ev, "fast", "slow", "x")
-    assert verdict.status == v.REPRODUCED and verdict.reason.endswith("wholly above 0.5")
+    assert ev_.learned(ev, "fast") and ev_.learned(ev, "slow")
+    verdict = check(ev, "faster", ("fast", "slow"))
+    assert verdict.status == REPRODUCED and words.reason(verdict).endswith("wholly above 0.5")
 
 
-def test_the_printed_rule_names_every_status():
-    for word in ("Not testable", "did not learn", "reproduced", "contradicted", "within noise",
-                 "not reproduced", "as reliably", "Not a test of reuse", "25%"):
+def test_the_printed_rule_names_every_step():
+    for word in ("Not testable", "did not learn", "reproduced", "contradicted", "within noise", "not reproduced",
+                 "not a test of reuse", "a test of sharing", "a test of reuse switched off", "25%", "90%",
+                 "without each seed", "one peer"):
         assert word in v.RULE
 
 
-def test_paired_difference_compares_each_seed_with_its_own_pair():
-    """Per seed: the mean of the last fifth of each run (at least 3 evaluations), and a - b; a seed with one run only is
-    left out. The pairs differ by exactly 1 while the seeds spread over hundreds, so an
-    interval over pairs is the point 1, which an unpaired comparison could not show."""
+def test_a_paired_difference_is_the_iqm_of_each_seeds_own_difference():
+    """The pairs differ by exactly 1 while the seeds spread over hundreds, so an interval over
+    pairs is the point 1, which an unpaired comparison could not show; a seed with one run only
+    is left out; one seed far off moves the IQM of the differences no more than a curve's IQM."""
     steps = np.arange(10) * 100
     rows = []
-    for seed, level in enumerate([0.0, 300.0, -200.0, 900.0]):
-        for label, shift in (("a", 1.0), ("b", 0.0)):
-            if seed == 3 and label == "a":
+    for seed, (level, gap) in enumerate([(1000.0, 1.0), (1300.0, 1.0), (800.0, 1.0), (1900.0, 1.0), (1050.0, 500.0),
+                                         (1007.0, None)]):
+        for label, shift in (("a", gap), ("b", 0.0)):
+            if shift is None:
                 continue
-            y = np.r_[np.zeros(7), level + shift + np.arange(3)]  # the last 3: level + shift + 1
-            rows += [{"label": label, "seed": seed, "step": s, "ret": v} for s, v in zip(steps, y)]
-    runs, diff = v.paired_difference(pd.DataFrame(rows), "a", "b", y="ret")
-    assert runs.index.tolist() == [0, 1, 2]
-    assert runs["b"].tolist() == [1.0, 301.0, -199.0] and runs["difference"].tolist() == [1.0, 1.0, 1.0]
-    assert (diff.point, diff.low, diff.high) == (1.0, 1.0, 1.0)
+            y = np.r_[np.zeros(7), level + shift + np.arange(3)]
+            rows += [{"label": label, "seed": seed, "step": s, "eval_return": x} for s, x in zip(steps, y)]
+    ev = ev_.Evidence(pd.DataFrame(rows), RETURN)
+    pairs = ev.pairs("a", "b")
+    assert pairs.index.tolist() == [0, 1, 2, 3, 4] and pairs["difference"].tolist() == pytest.approx([1, 1, 1, 1, 500])
+    d = ev.paired("a", "b")
+    assert d.point == pytest.approx(1.0)  # IQM of five: the middle three, all 1 (the mean would be 100.8)
+    verdict = check(ev, "paired_higher", ("a", "b"))
+    assert verdict.status == REPRODUCED and verdict.estimates[0].higher_on == 5
 
 
 def test_reuse_table_reads_reuse_and_final_values_per_env_and_label():
-    """Two envs, two labels: the reuse columns come from M and ``iterations_reusing``, the final
-    value from the last fifth of the evaluation points."""
     shared, own = [[0.5, 0.5], [0.5, 0.5]], [[1.0, 0.0], [0.0, 1.0]]
     rows = []
-    for env in ("e1", "e2"):
-        for label, m, every in (("mappo", shared, 1.0), ("happo", own, 0.0)):
+    for env, mappo_owner in (("e1", [0, 0]), ("e2", [0, 1])):
+        for label, m, every, owner in (("mappo", shared, 1.0, mappo_owner), ("happo", own, 0.0, [0, 1])):
             for seed in (0, 1):
-                rows += [{"env": env, "label": label, "seed": seed, "step": s, "reuse_matrix": m,
-                          "iterations_reusing": every, "ret": float(s >= 7) * (seed + 1)} for s in range(10)]
-    owners = {("e1", "mappo"): [0, 0], ("e2", "mappo"): [0, 1]} | {(e, "happo"): [0, 1] for e in ("e1", "e2")}
-    t = tables.reuse_table(pd.DataFrame(rows), "ret", owners)
+                rows += [{"env": env, "label": label, "seed": seed, "step": s, "reuse_matrix": m, "owner": owner,
+                          "iterations_reusing": every, "eval_return": float(s >= 7) * (seed + 1)} for s in range(10)]
+    t = tables.reuse_table(pd.DataFrame(rows), RETURN)
     assert t.index.tolist() == [("e1", "mappo"), ("e1", "happo"), ("e2", "mappo"), ("e2", "happo")]
     assert t["seeds"].tolist() == [2] * 4 and t["all_iterations"].tolist() == [1.0, 0.0, 1.0, 0.0]
     assert t["mean_peer_share"].tolist() == [0.5, 0.0, 0.5, 0.0]
     assert t["mean_across_nets"].tolist() == [0.0, 0.0, 0.5, 0.0]  # one net on e1: no reuse across nets
     assert t["across_reusing"].tolist() == [0.0, 0.0, 1.0, 0.0]
-    assert tables.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), "ret", owners).empty  # SEAC-like runs
+    assert tables.reuse_table(pd.DataFrame(rows).assign(reuse_matrix=None), RETURN).empty  # SEAC-like runs
     assert t["final"].tolist() == [1.5] * 4  # seeds' last fifth (at least 3 evaluations): 1 and 2
 
 
 def test_sweep_table_chooses_the_best_final_value_and_breaks_ties_by_speed():
-    """Family f: a ends at 0.9, b at 0.89 (a tie within 0.02) and reaches 0.5 sooner, c at 0.5;
-    family g has one setting. b and the lone setting are chosen."""
     rows = []
     for label, level, reach in (("a", 0.9, 7), ("b", 0.89, 2), ("c", 0.5, 9), ("d", 0.3, 10)):
         for seed in (0, 1):
             rows += [{"label": label, "seed": seed, "step": s * 10, "eval_success": level if s >= reach else 0.0}
                      for s in range(10)]
-    t = tables.sweep_table(pd.DataFrame(rows), {"a": "f", "b": "f", "c": "f", "d": "g"}, v.WIN_RATE)
+    t = tables.sweep_table(pd.DataFrame(rows), {"a": "f", "b": "f", "c": "f", "d": "g"}, WIN_RATE)
     assert t["chosen"].to_dict() == {"a": False, "b": True, "c": False, "d": True}
     assert t.loc["b", "steps"] == 20 and t.loc["d", "steps"] == 90  # never reached 0.5: counted at its end
     assert t.loc["a", "final"] == pytest.approx(0.9) and t["seeds"].tolist() == [2] * 4
 
 
-# --- a claim about OAPPO tests reuse only where reuse happened (issue 32) -------------------
+# --- what the runs tested: reuse across networks, read the same on every metric --------------
 
 SHARED, OWN = np.array([[0.7, 0.3], [0.3, 0.7]]), np.eye(2)
 
 
-def with_reuse(df, reusing):
-    """``df`` with each curve's algorithm (its label) and its reuse matrix M per evaluation:
-    ``reusing[label]`` picks the steps at which M gave a peer weight (others: M = I)."""
+def with_reuse(df, reusing, owner=(0, 1)):
+    """``df`` with each curve's algorithm (its label), its seats' networks ``owner`` and its reuse
+    matrix M per evaluation: ``reusing[label]`` picks the steps at which M gave a peer weight."""
     df = df.assign(algo=df["label"])
     df["reuse_matrix"] = [SHARED if label in reusing and reusing[label](step) else OWN
                           for label, step in zip(df["label"], df["step"])]
+    df["owner"] = [np.array(owner)] * len(df)
     return df
 
 
 def test_a_claim_about_oappo_is_no_test_of_reuse_when_its_gate_closed_early():
-    # OAPPO reaches the optimum at 50k (evaluation 10 of 21) but gave peers weight only at the
-    # first 2 evaluations (0 and 5k): 2 of the 11 up to its threshold, 18% < 25%
+    # OAPPO's ramp starts at 0.05 (its first tenth: 0 and 0.1) and ends at 1: 90% of that way, 0.905, is
+    # first reached at 50k, evaluation 11 of 21; it gave peers weight at the first 2 (0 and 5k): 2 of 11 < 25%
     base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
     closed = with_reuse(base, {"oappo": lambda s: s <= 5_000, "oatrpo": lambda s: True})
-    out = {x.claim: x for x in judge("fig3b", closed)}
+    out = {x.claim.text: x for x in judge("fig3b", closed)}
     verdict = out["OAPPO converges faster than HAPPO"]
-    assert verdict.status == v.NOT_REUSE
-    assert verdict.reason.startswith("the gate last opened across networks at 5,000 steps; oappo reused across networks "
-                                     "at 18.2% of its evaluated iterations while it learned (mean over seeds), below 25%; "
-                                     "by the interval alone reproduced: P(oappo faster) 1.000")  # beside the status
-    assert verdict.estimate.startswith("P(oappo faster) 1.000")  # the interval stays as evidence
-    assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
-    # OATRPO reused throughout: its claims are decided by the interval as before
-    assert out["OATRPO converges faster than HAPPO"].status == v.REPRODUCED
-    # a gate open at every evaluation makes the same data a test of reuse
+    assert verdict.status == NOT_REUSE and verdict.interval_status == REPRODUCED
+    r = verdict.reuse[0]
+    assert (r.while_learning, r.last_open, r.networks, r.sharing) == (pytest.approx(2 / 11), 5_000, 2, False)
+    assert words.reason(verdict).startswith("the gate last opened across networks at 5,000 steps; oappo reused across "
+                                            "networks at 18.2% of its evaluated iterations while it learned")
+    assert "by the interval alone reproduced: P(oappo faster) 1.000" in words.reason(verdict)
+    assert out["OAPPO ends above MAPPO"].status == NOT_REUSE
+    assert out["OATRPO converges faster than HAPPO"].status == REPRODUCED  # OATRPO reused throughout
     opened = with_reuse(base, {"oappo": lambda s: True, "oatrpo": lambda s: True})
-    assert {x.claim: x for x in judge("fig3b", opened)}["OAPPO converges faster than HAPPO"].status == v.REPRODUCED
+    assert {x.claim.text: x for x in judge("fig3b", opened)}["OAPPO converges faster than HAPPO"].status == REPRODUCED
 
 
-def test_reuse_is_counted_while_the_curve_learns_and_at_least_a_quarter_is_enough():
+def test_reuse_while_learning_ends_at_ninety_percent_of_the_gain_on_every_metric():
+    """The same curve, scaled to a fraction of the optimum, a win rate or a return, reads the same
+    share: the learning phase ends at its first evaluation at 90% of its way to its final value."""
+    ramp = curves({"oappo": (50_000, 1.0)})  # reaches 90% of its gain at 50k: evaluations 0-50k, 11 of them
+    shares = []
+    for metric, scale in ((None, 1.0), (WIN_RATE, 0.9), (RETURN, 3000.0)):
+        df = ramp.assign(frac_opt=ramp["frac_opt"] * scale)
+        if metric is not None:
+            df = df.rename(columns={"frac_opt": metric.column})
+        ev = ev_.Evidence(with_reuse(df, {"oappo": lambda s: s <= 10_000}), *(() if metric is None else (metric,)))
+        shares.append(ev.reuse("oappo").while_learning)
+    assert shares == pytest.approx([3 / 11] * 3)  # 3 of the 11 evaluations (0, 5k, 10k)
+    # reuse after the learning ended counts overall, not while learning
+    after = ev_.Evidence(with_reuse(ramp, {"oappo": lambda s: s > 50_000})).reuse("oappo")
+    assert (after.while_learning, after.last_open) == (0.0, 100_000) and after.overall == pytest.approx(10 / 21)
+
+
+def test_a_curve_whose_seats_share_a_network_is_a_test_of_sharing():
     base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
-    # reuse until the threshold (50k), none after: every iteration that learned reused
-    learning = v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 50_000}))
-    assert learning.summary.loc["oappo", "reusing"] == 1.0
-    assert v.reuse_gap(learning, ("oappo", "happo")) is None
-    # reuse only after the threshold, at 10 of 21 evaluations of the whole run: no test of reuse
-    after = v.Evidence(with_reuse(base, {"oappo": lambda s: s > 50_000}))
-    assert after.summary.loc["oappo", "reusing"] == 0.0
-    assert after.summary.loc["oappo", "last_reuse_step"] == 100_000
-    assert "reused across networks at 0.0% of its evaluated iterations" in v.reuse_gap(after, ("oappo", "happo"))[1]
-    # the boundary: 3 of 11 evaluations (27%) is a test, 2 of 11 (18%) is not
-    assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 10_000})), ("oappo", "happo")) is None
-    assert v.reuse_gap(v.Evidence(with_reuse(base, {"oappo": lambda s: s <= 5_000})), ("oappo", "happo"))
-    # never reused at all; no reuse matrix on record
-    never = v.Evidence(with_reuse(base, {}))
-    assert v.reuse_gap(never, ("oappo", "happo"))[1].startswith("no seed ever gave another network's seats weight; "
-                                                                "oappo reused across networks at 0.0%")
-    unknown = v.Evidence(base.assign(algo=base["label"]))
-    assert v.reuse_gap(unknown, ("oappo", "happo")) == (v.NOT_REUSE, "oappo's runs hold no reuse matrix, so whether "
-                                                                      "it reused is unknown")
+    one_net = with_reuse(base, {}, owner=(0, 0))
+    verdict = {x.claim.text: x for x in judge("fig3b", one_net)}["OAPPO ends above MAPPO"]
+    assert verdict.status == SHARING and verdict.reuse[0].sharing
+    assert "its seats share networks, so the claim tests parameter sharing" in words.reason(verdict)
 
 
-def test_only_claims_that_an_eq9_curve_beats_another_need_reuse_also_between_two_of_its_settings():
+def test_only_claims_that_an_eq9_curve_beats_another_check_reuse():
     base = _fig3b({"mappo": (90_000, 0.6), "happo": (90_000, 1.0), "oappo": (50_000, 1.0), "oatrpo": (30_000, 1.0)})
-    ev = v.Evidence(with_reuse(base, {}))  # nobody reuses
-    assert v.reuse_gap(ev, ("happo", "mappo")) is None  # HAPPO does not reuse by Eq. 9
-    assert v.reuse_gap(ev, ("oappo",)) is None  # "stuck" / "optimal": one curve
-    same = ev.algos | {"oatrpo": "oappo"}  # two OAPPO curves (a sigma sweep, gated against always-on)
-    ev.algos = same
-    assert v.reuse_gap(ev, ("oatrpo", "oappo"))[0] == v.NOT_REUSE  # a setting that never reused shows nothing of it
-    assert v.reuse_gap(v.Evidence(base), ("oappo", "happo")) is None  # no algorithm named: nothing to check
+    ev = ev_.Evidence(with_reuse(base, {}))  # nobody reuses
+    assert check(ev, "higher", ("happo", "mappo")).status == REPRODUCED  # HAPPO does not reuse by Eq. 9
+    assert check(ev, "optimal", ("oappo",)).status == REPRODUCED  # "optimal" checks no mechanism
+    assert check(ev, "faster", ("oatrpo", "oappo")).status == NOT_REUSE
+    assert check(ev_.Evidence(base), "faster", ("oappo", "happo")).status == REPRODUCED  # no algorithm named
 
 
-def test_not_testable_comes_before_not_a_test_of_reuse():
+def test_not_testable_comes_before_the_mechanism():
     df = with_reuse(_fig3b({"mappo": (90_000, 0.6), "happo": flat(-0.5), "oappo": (50_000, 1.0),
                             "oatrpo": (30_000, 1.0)}), {})
-    out = {x.claim: x for x in judge("fig3b", df)}
-    assert out["OAPPO converges faster than HAPPO"].status == v.NOT_TESTABLE
-    assert out["OAPPO ends above MAPPO"].status == v.NOT_REUSE
+    out = {x.claim.text: x for x in judge("fig3b", df)}
+    assert out["OAPPO converges faster than HAPPO"].status == NOT_TESTABLE
+    assert out["OAPPO ends above MAPPO"].status == NOT_REUSE
 
 
 def test_a_returns_final_value_is_its_last_fifth_and_its_initial_its_first_tenth():
-    # 21 evaluation points: the last fifth is the last 4, the first tenth the first 2
     steps = np.arange(0, 21)
     df = pd.DataFrame(dict(label="a", seed=0, step=steps, eval_return=steps.astype(float)))
-    run = v.Evidence(df, metric=v.RETURN).runs.iloc[0]
+    run = ev_.Evidence(df, RETURN).runs.iloc[0]
     assert run["final"] == np.mean([17, 18, 19, 20]) and run["initial"] == np.mean([0, 1])
-    # a tenth of 21 is 2 evaluations: the window holds 3 at least
-    assert v.Evidence(df.rename(columns={"eval_return": "frac_opt"})).runs.iloc[0]["final"] == np.mean([18, 19, 20])
+    assert ev_.Evidence(df.rename(columns={"eval_return": "frac_opt"})).runs.iloc[0]["final"] == np.mean([18, 19, 20])
 
 
 def test_steadier_is_judged_over_the_seeds_that_learned_and_faster_says_who_never_got_there():
-    # one seed of "steady" never leaves 0: it has no drop, and would otherwise rank as the steadiest
     df = win_curves({"steady": [0, 0.3, 0.6, 0.8, 0.8], "shaky": [0, 0.6, 0.1, 0.7, 0.8]})
     df.loc[(df["label"] == "steady") & (df["seed"] == 0), "eval_success"] = 0.0
-    ev = v.Evidence(df, metric=v.WIN_RATE)
-    verdict = v.stabler(ev, "steady", "shaky", "steady improves more stably")
-    assert "over 4 seeds that learned" in verdict.evidence and verdict.held
+    verdict = check(ev_.Evidence(df, WIN_RATE), "stabler", ("steady", "shaky"))
+    assert verdict.held and [lv.seeds for lv in verdict.levels] == [4, 5]
     df.loc[(df["label"] == "steady") & (df["seed"] > 0), "eval_success"] = 0.0
-    lone = v.stabler(v.Evidence(df, metric=v.WIN_RATE), "steady", "shaky", "x")
-    assert lone.status == v.NOT_TESTABLE and lone.reason == "fewer than 2 seeds that learned: steady (0 of 5)"
+    lone = v.ESTIMATORS["improvement_of_learned"](ev_.Evidence(df, WIN_RATE), Claim("x", "stabler", ("steady", "shaky")))
+    assert words.gap(lone, None) == "fewer than 2 seeds that learned: steady (0 of 5)"
     slow = win_curves({"fast": [0, 0.6, 0.8, 0.8, 0.8], "slow": [0, 0.1, 0.3, 0.4, 0.45]})
-    said = v.faster(v.Evidence(slow, metric=v.WIN_RATE), "fast", "slow", "x")
-    assert said.reason.endswith("; slow did not reach a 50% win rate in the budget (counted at its end)")
+    said = check(ev_.Evidence(slow, WIN_RATE), "faster", ("fast", "slow"))
+    assert said.never_reached == ("slow",)
+    assert words.reason(said).endswith("; slow did not reach a win rate of 50% in the budget (counted at its end)")
+
+
+# --- selection, and the seed that carries a verdict ------------------------------------------
+
+def selection_runs(gated_final, always_final, never_final, gated_open, owner=(0, 1, 2), seeds=6):
+    """Returns on three curves ramping to per-seed finals; the gated curve's M gives peers weight
+    where ``gated_open(step)``, always-on's always, HAPPO's never."""
+    steps = np.arange(0, 101) * 10_000
+    rows = []
+    for label, finals in (("oappo gated", gated_final), ("happo", never_final), ("oappo always", always_final)):
+        for seed in range(seeds):
+            y = np.minimum(steps / 500_000, 1.0) * finals[seed]
+            n = len(owner)
+            for s, x in zip(steps, y):
+                m = np.eye(n) if label == "happo" or (label == "oappo gated" and not gated_open(s)) else \
+                    np.full((n, n), 0.3 / (n - 1)) + np.eye(n) * (0.7 - 0.3 / (n - 1))
+                rows.append({"label": label, "seed": seed, "step": s, "eval_return": x, "reuse_matrix": m,
+                             "owner": np.array(owner), "algo": "happo" if label == "happo" else "oappo"})
+    return pd.DataFrame(rows)
+
+
+SELECTS = Claim("x", "selects", ("oappo gated", "happo", "oappo always"))
+
+
+def test_selection_needs_the_gated_curve_above_both_ends():
+    base = [1000, 1100, 1200, 1300, 1400, 1500]
+    ev = ev_.Evidence(selection_runs([b + 200 for b in base], base, base, lambda s: True), RETURN)
+    v_ = v.check(ev, SELECTS)
+    assert v_.status == REPRODUCED and [e.interval.point for e in v_.estimates] == pytest.approx([200, 200, 0])
+    # above no reuse but not above always-on: not reproduced; below always-on on every seed: contradicted
+    ev = ev_.Evidence(selection_runs([b + 200 for b in base], [b + 400 for b in base], base, lambda s: True), RETURN)
+    assert v.check(ev, SELECTS).status == CONTRADICTED
+
+
+def test_a_gate_with_one_peer_or_shut_early_is_a_test_of_reuse_switched_off():
+    base = [1000, 1100, 1200, 1300, 1400, 1500]
+    two = ev_.Evidence(selection_runs([b + 200 for b in base], base, base, lambda s: True, owner=(0, 1)), RETURN)
+    switch = v.check(two, SELECTS)
+    assert switch.status == SWITCH and switch.interval_status == REPRODUCED and switch.reuse[0].peers == 1
+    assert "has one peer to choose: it is a switch" in words.reason(switch)
+    early = ev_.Evidence(selection_runs([b + 200 for b in base], [b - 300 for b in base], base,
+                                        lambda s: s <= 100_000), RETURN)
+    shut = v.check(early, SELECTS)
+    assert shut.status == SWITCH and shut.reuse[0].shut_early == 6
+    text = words.reason(shut)
+    assert "on all 6 seeds its gate last let another network in within the first 25% of the run" in text
+    assert "(reuse lowered the final value)" in text and "the gate helped by switching reuse off" in text
+
+
+def test_a_verdict_one_seed_carries_names_that_seed():
+    base = [1000, 1100, 1200, 1300, 1400, 1500]
+    ev = ev_.Evidence(selection_runs([b + 1 for b in base], base, base, lambda s: True), RETURN)
+    steady = check(ev, "paired_higher", ("oappo gated", "happo"))
+    assert steady.status == REPRODUCED and not steady.one_seed  # every seed above: no seed decides
+    # differences 3, 3, 3, 3, -1, -1: the IQM of six keeps one -1, and resamples with four or more
+    # -1 (probability 0.10) put the interval's low end at 0 or below; without either -1 seed the IQM
+    # of five keeps none, and only resamples with four or more -1 of five (0.007) go below
+    shaky = selection_runs([b + d for b, d in zip(base, (3, 3, 3, 3, -1, -1))], base, base, lambda s: True)
+    verdict = check(ev_.Evidence(shaky, RETURN), "paired_higher", ("oappo gated", "happo"))
+    assert verdict.status == WITHIN_NOISE and verdict.one_seed
+    assert dict(verdict.robustness.flips) == {4: REPRODUCED, 5: REPRODUCED}
+    for seed, status in verdict.robustness.flips:  # recomputed: without that seed the interval reads the record's
+        again = check(ev_.Evidence(shaky[shaky["seed"] != seed], RETURN), "paired_higher", ("oappo gated", "happo"))
+        assert again.interval_status == status
+    assert words.seeds(verdict) == ("6 seeds, higher on 4 of 6; rests on one seed: without any one of seeds 4 or 5 the "
+                                    "interval reads reproduced")

@@ -13,36 +13,14 @@ import pandas as pd
 
 from oapo_lite import store
 from oapo_lite.envs.layouts import FAMILIES, LAYOUTS, load_layout, measure
-from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study import experiments, figures, grid, verdicts
-
-LAMBDAS = figures.mazes.LAMBDAS
-ADAPTIVE = figures.mazes.ADAPTIVE_CURVES[0][0]  # gradient_test at the default sigma and lambda: one setting
-# curve label -> the TrainConfig fields that make it; OAPPO's lambda = 0.7 is the "oappo" curve
-CURVES = {"oappo": dict(algo="oappo"), "happo": dict(algo="happo"), "mappo": dict(algo="mappo")} | {
-    f"oappo lambda={lam:g}": dict(algo="oappo", reuse_lambda=lam) for lam in LAMBDAS if lam != TrainConfig.reuse_lambda} | {
-    ADAPTIVE: dict(figures.mazes.ADAPTIVE_CURVES[0][1])}
-
-
-def layout_figures(layouts=None) -> list[grid.Figure]:
-    """One grid entry per layout (not in ``figures.GRID``: the study is run on request)."""
-    layouts = sorted(LAYOUTS) if layouts is None else list(layouts)
-    unknown = sorted(set(layouts) - set(LAYOUTS))
-    if unknown:
-        raise ValueError(f"unknown layouts {unknown}; the study's layouts are {sorted(LAYOUTS)}")
-    return [grid.Figure(f"layout_{name}", tuple(CURVES.items()), common=dict(env=f"layout:{name}"))
-            for name in layouts]
-
-
-def study_runs(budget: str, layouts=None) -> list[tuple[str, str, TrainConfig]]:
-    """(layout, curve label, config) for every run of the study at ``budget``."""
-    return [(fig.common["env"].removeprefix("layout:"), label, cfg)
-            for fig in layout_figures(layouts) for label, cfg in figures.figure_runs(fig, budget)]
-
+from oapo_lite.study.catalogue.figures.layouts import ADAPTIVE, CURVES, study_runs
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.catalogue.metrics import THRESHOLD
+from oapo_lite.study.judge import evidence
 
 def load(budget: str, layouts=None) -> pd.DataFrame:
     """Tidy rows of the study, read from the run cache (``experiments.train_runs(budget,
-    layout_figures())`` trains what is missing; ``export`` writes the study's table). Reads only."""
+    catalogue.figures.layouts.layout_figures())`` trains what is missing; ``export`` writes the study's table). Reads only."""
     frames = []
     for name, label, cfg in study_runs(budget, layouts):
         if not experiments.run_path(cfg, budget).exists():
@@ -63,8 +41,8 @@ RUN_FIELDS = ["algo", "env", "sigma", "reuse_lambda", "reuse_adapt", "steps", "g
 
 def per_run(df: pd.DataFrame) -> pd.DataFrame:
     """One row per run: layout, curve, seed, its config's defining fields and revision, and
-    ``verdicts.per_run``'s steps to 95% of the optimum and final level."""
-    runs = pd.concat({name: verdicts.per_run(rows) for name, rows in df.groupby("layout", sort=False)},
+    ``evidence.per_run``'s steps to 95% of the optimum and final level."""
+    runs = pd.concat({name: evidence.per_run(rows) for name, rows in df.groupby("layout", sort=False)},
                      names=["layout", None]).reset_index(level=0).reset_index(drop=True)
     fields = [c for c in RUN_FIELDS if c in df.columns]
     if fields:
@@ -86,7 +64,7 @@ def describe() -> pd.DataFrame:
 def table(df: pd.DataFrame) -> pd.DataFrame:
     """Per layout and curve: seeds that reached 95%, and the IQMs of steps to 95% and of the
     final level with their 95% intervals."""
-    return pd.concat({name: verdicts.intervals(rows) for name, rows in df.groupby("layout", sort=False)},
+    return pd.concat({name: evidence.intervals(rows) for name, rows in df.groupby("layout", sort=False)},
                      names=["layout", "label"])
 
 
@@ -94,7 +72,7 @@ def oappo_vs_happo(df: pd.DataFrame) -> pd.DataFrame:
     """Per layout: P(OAPPO reaches 95% of the optimum in fewer steps than HAPPO), with its interval."""
     rows = {}
     for name, runs in df.groupby("layout", sort=False):
-        p = verdicts.Evidence(runs).improvement("oappo", "happo", "steps")
+        p = evidence.Evidence(runs).improvement("oappo", "happo", "steps")
         rows[name] = {"p_oappo_faster": p.point, "low": p.low, "high": p.high}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("layout")
 
@@ -103,7 +81,7 @@ def trapped(df: pd.DataFrame) -> pd.DataFrame:
     """Per layout (rows) and curve (columns): the seeds whose final level stayed below 95% of
     the optimum."""
     runs = per_run(df)
-    return (runs["final"] < verdicts.THRESHOLD).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
+    return (runs["final"] < THRESHOLD).groupby([runs["layout"], runs["label"]]).sum().unstack("label")
 
 
 def fixed_curves() -> list[str]:
@@ -118,7 +96,7 @@ def adaptive_vs_best_fixed(df: pd.DataFrame, adaptive: str = ADAPTIVE) -> pd.Dat
     intervals, and the seeds of each of the three that stayed trapped below 95%."""
     rows = {}
     for name, runs in df.groupby("layout", sort=False):
-        ev = verdicts.Evidence(runs)
+        ev = evidence.Evidence(runs)
         fixed = [c for c in fixed_curves() if c in ev.summary.index]
         best = min(fixed, key=lambda c: (ev.level(c, "steps").point, -ev.level(c, "final").point))
         p, p_happo = (ev.improvement(adaptive, other, "steps") for other in (best, "happo"))

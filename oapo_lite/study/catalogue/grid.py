@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, fields, replace
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.a2c_family import beside_ppo
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study.verdicts import FRAC_OPT, Metric
+from oapo_lite.study.catalogue.metrics import FRAC_OPT, Metric
 
 
 @dataclass(frozen=True)

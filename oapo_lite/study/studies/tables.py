@@ -6,13 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from oapo_lite.envs import registry as env_registry
-from oapo_lite.neural.nets import owners
 from oapo_lite.reuse import peer_share
 from oapo_lite.store import read_arrays
-from oapo_lite.study import experiments, verdicts
-from oapo_lite.study.figures import figure_runs
-from oapo_lite.study.statistics import iqm
+from oapo_lite.study.catalogue.metrics import Metric
+from oapo_lite.study.judge.evidence import per_run
+from oapo_lite.study.judge.statistics import iqm
+from oapo_lite.study.runs import experiments
 
 
 def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
@@ -26,9 +25,10 @@ def reuse_per_run(df: pd.DataFrame) -> pd.DataFrame:
     rows = []
     groups = df.sort_values("step", kind="stable").groupby(["label", "seed"], sort=False) if len(df) else []
     for (label, seed), run in groups:
-        steps, share = verdicts.peer_shares(run)
-        if not len(steps):  # SEAC, SePS: no reuse matrix
+        has_m = run[run["reuse_matrix"].notna()] if "reuse_matrix" in run else run.iloc[:0]
+        if has_m.empty:  # SEAC, SePS: no reuse matrix
             continue
+        steps, share = has_m["step"].to_numpy(float), has_m["reuse_matrix"].map(peer_share).to_numpy(float)
         reusing = steps[share > 0]
         every = run["iterations_reusing"].iloc[-1] if "iterations_reusing" in run else np.nan
         rows.append({"label": label, "seed": seed, "evaluations": len(steps), "reusing": float(np.mean(share > 0)),
@@ -47,26 +47,23 @@ def reuse_summary(df: pd.DataFrame) -> pd.DataFrame:
         all_iterations=("all_iterations", "mean"))
 
 
-def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd.DataFrame:
-    """Per env and label: seeds; the share of every iteration with any peer
-    weight (``all_iterations``, means over the runs that recorded it; seats that share a
-    network always weigh each other); at the evaluated iterations, the mean peer share, and,
-    across networks alone (``peer_share`` with ``owners[(env, label)]``, the network of each
-    seat: the reuse Eq. 9's gate decided), the share of them with any weight
-    (``across_reusing``) and the mean share (``mean_across_nets``); and the final ``y``, a run's
-    mean over the last ``tail`` of its evaluation points, as mean and standard deviation over
-    seeds. Runs without a reuse matrix (SEAC, SePS) have no row."""
+def reuse_table(df: pd.DataFrame, metric: Metric) -> pd.DataFrame:
+    """Per env and label: seeds; the share of every iteration with any peer weight
+    (``all_iterations``, means over the runs that recorded it; seats that share a network always
+    weigh each other); at the evaluated iterations, the mean peer share, and, across networks
+    alone (``peer_share`` with each row's ``owner``, the network of each seat as the run recorded
+    it: the reuse Eq. 9's gate decided), the share of them with any weight (``across_reusing``)
+    and the mean share (``mean_across_nets``); and the final value by ``metric`` (a run's mean
+    over its final window), as mean and standard deviation over seeds. Runs without a reuse
+    matrix (SEAC, SePS) have no row."""
     parts = []
     if "reuse_matrix" not in df:  # no run recorded M (or no run at all)
         return pd.DataFrame()
-    lacking = [c for c in ("env", "label", "seed", "step", y) if c not in df]
+    lacking = [c for c in ("env", "label", "seed", "step", "owner", metric.column) if c not in df]
     if lacking:
         raise ValueError(f"the runs lack the columns {lacking} (experiments.load_figure's rows have them)")
-    unknown = sorted({(e, label) for e, label in zip(df["env"], df["label"])} - set(owners))
-    if unknown:
-        raise ValueError(f"owners names no network of each seat for {unknown} (seat_networks gives them)")
-    for env, part in with_across_share(df, owners).groupby("env", sort=False):
-        final = verdicts.per_run(part, tail=tail, y=y).groupby("label", sort=False)["final"]
+    for env, part in with_across_share(df).groupby("env", sort=False):
+        final = per_run(part, metric).groupby("label", sort=False)["final"]
         per_seed = part["across_share"].groupby([part["label"], part["seed"]], sort=False)
         parts.append(reuse_summary(part)[["seeds", "all_iterations", "mean_peer_share"]]
                      .join(per_seed.apply(lambda x: (x > 0).mean()).groupby(level=0, sort=False).mean()
@@ -77,29 +74,28 @@ def reuse_table(df: pd.DataFrame, y: str, owners: dict, tail: float = 0.2) -> pd
     return pd.concat(parts) if parts else pd.DataFrame()
 
 
-def with_across_share(df: pd.DataFrame, owners: dict) -> pd.DataFrame:
+def with_across_share(df: pd.DataFrame) -> pd.DataFrame:
     """The rows of ``df`` that hold a reuse matrix, with ``across_share``: M's weight on the seats
-    of other networks (``peer_share`` with ``owners[(env, label)]``), for runs trained before the
+    of other networks (``peer_share`` with the row's ``owner``), for runs trained before the
     results recorded it."""
-    df = read_arrays(df, ("reuse_matrix",)).dropna(subset=["reuse_matrix"])
-    return df.assign(across_share=[peer_share(m, owners[env, label])
-                                   for m, env, label in zip(df["reuse_matrix"], df["env"], df["label"])])
+    df = read_arrays(df, ("reuse_matrix", "owner")).dropna(subset=["reuse_matrix"])
+    return df.assign(across_share=[peer_share(m, list(np.asarray(o, int))) for m, o in zip(df["reuse_matrix"],
+                                                                                           df["owner"])])
 
 
-def readings_table(figure: str, budget: str, y: str, tail: float = 0.2) -> pd.DataFrame:
-    """``reuse_table`` of a readings figure's runs on disk at ``budget`` (empty where it has none),
-    each curve's seats mapped to their networks by ``seat_networks``."""
+def readings_table(figure: str, budget: str, metric: Metric) -> pd.DataFrame:
+    """``reuse_table`` of a readings figure's runs on disk at ``budget`` (empty where it has none)."""
     runs = experiments.load_figure(figure, budget, skip_missing=True)
-    return pd.DataFrame() if runs.empty else reuse_table(runs, y, seat_networks(figure, budget), tail)
+    return pd.DataFrame() if runs.empty else reuse_table(runs, metric)
 
 
-def sweep_table(df: pd.DataFrame, family: dict, metric: verdicts.Metric, tie: float = 0.02) -> pd.DataFrame:
+def sweep_table(df: pd.DataFrame, family: dict, metric: Metric, tie: float = 0.02) -> pd.DataFrame:
     """A tuning sweep, one row per setting (curve label): its ``family[label]``, seeds, final
     value (mean over seeds of each run's last fifth of evaluations) and env steps to the
     metric's threshold (IQM over seeds, a run that never gets there counted at its end); and
     ``chosen`` by the sweep's rule: per family the highest final value, where settings within
     ``tie`` of it tie and the fewest steps among them wins."""
-    runs = verdicts.per_run(df, metric.threshold, tail=0.2, y=metric.column)
+    runs = per_run(df, Metric(metric.column, metric.threshold, metric.floor, metric.reach, metric.final, tail=0.2))
     t = runs.groupby("label", sort=False).agg(seeds=("seed", "size"), final=("final", "mean"),
                                               steps=("steps_to_threshold", lambda s: float(iqm(s.to_numpy()))))
     t.insert(0, "family", [family[label] for label in t.index])
@@ -107,14 +103,3 @@ def sweep_table(df: pd.DataFrame, family: dict, metric: verdicts.Metric, tie: fl
     contenders = t[t["final"] >= best - tie]
     t["chosen"] = t.index.isin(contenders.sort_values("steps", kind="stable").groupby("family").head(1).index)
     return t
-
-
-def seat_networks(figure: str, budget: str) -> dict[tuple[str, object], list[int]]:
-    """(env, curve label) -> the network of each seat in that curve's runs (``nets.owners``), from
-    each env's agent types (``registry.agent_types``)."""
-    types, out = {}, {}
-    for label, cfg in figure_runs(figure, budget):
-        if cfg.env not in types:
-            types[cfg.env] = env_registry.agent_types(cfg.env, cfg.max_steps)
-        out[cfg.env, label] = owners(cfg.networks_used, types[cfg.env])
-    return out

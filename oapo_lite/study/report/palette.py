@@ -22,6 +22,9 @@ PALETTE = {
     # within its type only
     "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own type": "#7fb8b3",
     "oappo gated sampled": "#7b6888", "oappo always sampled": "#e7cb94",
+    # the dose-response on 2s3z: the gate at sigma from tight (darker) to loose (lighter), between
+    # no reuse (HAPPO) and always-on; its median sigma is the ablation's gated curve (``ALIASES``)
+    "oappo sigma=0.035": "#00441b", "oappo sigma=0.34": "#78c679", "oappo sigma=0.81": "#addd8e",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
     "oappo entropy x W[i,i]": "#5254a3",
@@ -40,7 +43,7 @@ PALETTE = {
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
 # other names of a curve in the table (the same runs drawn in another figure)
 ALIASES = {"oappo lambda=0.4": "lambda = 0.4", "oappo lambda=1": "lambda = 1", "oappo lambda=0.2": "lambda = 0.2",
-           "happo two legs": "happo"}
+           "happo two legs": "happo", "oappo sigma=0.046": "oappo gated"}
 
 
 def name(label) -> str:
@@ -56,4 +59,4 @@ def color(label) -> str:
     for candidate in (key, key.lower()):
         if candidate in PALETTE:
             return PALETTE[candidate]
-    raise ValueError(f"no colour for the curve {label!r}; add it to oapo_lite.study.palette.PALETTE")
+    raise ValueError(f"no colour for the curve {label!r}; add it to oapo_lite.study.report.palette.PALETTE")

@@ -22,7 +22,7 @@ from pathlib import Path
 import nbformat
 
 from oapo_lite import cli
-from oapo_lite.study.reproduce import NOTEBOOKS, ROOT, notebook_paths
+from oapo_lite.study.runs.reproduce import NOTEBOOKS, ROOT, notebook_paths
 
 OVERVIEW = "00_overview"
 

@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FuncFormatter
 
-from oapo_lite.study import palette
+from oapo_lite.study.report import palette
 from oapo_lite.envs.render import AGENT_COLOURS
-from oapo_lite.study.palette import OMITTED, REUSED
+from oapo_lite.study.report.palette import OMITTED, REUSED
 
 plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.grid": True, "grid.alpha": 0.3})
 YLABELS = {"frac_opt": "return / oracle optimum (below 0: step costs exceed arrival rewards)",

@@ -25,7 +25,7 @@ from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
 from oapo_lite.store import DamagedFile
 
-PACKAGE = Path(__file__).resolve().parents[1]
+PACKAGE = Path(__file__).resolve().parents[2]
 
 
 def train_job(cfg, checkpoints: str):

@@ -13,10 +13,10 @@ import time
 from pathlib import Path
 
 from oapo_lite import cli
-from oapo_lite.study import grid
-from oapo_lite.study.figures import FIGURES, get_figure
+from oapo_lite.study.catalogue import grid
+from oapo_lite.study.catalogue.figures import FIGURES, get_figure
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 NOTEBOOKS = ROOT / "notebooks"
 
 
@@ -126,7 +126,7 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     """Execute every numbered notebook, ``workers`` at a time (each in its own kernel; they
     only read the finished runs); ``inplace`` overwrites the committed copies. A failed notebook
     or an interrupt stops the others at once (``executors.in_processes``)."""
-    from oapo_lite.study.executors import in_processes
+    from oapo_lite.study.runs.executors import in_processes
 
     out_dir = NOTEBOOKS if inplace else ROOT / "build" / "notebooks" / budget
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -161,7 +161,7 @@ def _check_committed_data(moved: Path, budget: str, figures) -> None:
     """Refuse a moved figures tree that lacks committed results this command does not write:
     the notebooks read them whatever the budget (the claims table, the 20-seed and engine runs
     they quote), so they would fail after all the training."""
-    from oapo_lite.study import experiments
+    from oapo_lite.study.runs import experiments
 
     committed = ROOT / "figures"
     if moved == committed:
@@ -181,7 +181,7 @@ def _cluster_cpus(address: str | None) -> int:
     """The CPUs of the Ray cluster at ``address``; a private one would have this machine's."""
     if address is None:
         return os.cpu_count() or 1
-    from oapo_lite.study.executors import connect
+    from oapo_lite.study.runs.executors import connect
 
     ray, connected = connect(address)
     try:
@@ -224,7 +224,7 @@ def command_line() -> cli.Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from oapo_lite.study import experiments
+    from oapo_lite.study.runs import experiments
 
     parser = command_line()
     args = parser.parse_args(argv)
@@ -237,11 +237,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.address is not None and args.executor != "ray":
             raise ValueError(f"--address {args.address!r} needs --executor ray")
         if args.executor == "ray":
-            from oapo_lite.study.executors import check_address
+            from oapo_lite.study.runs.executors import check_address
 
             check_address(args.address)
         if args.plan:
-            from oapo_lite.study import costs
+            from oapo_lite.study.runs import costs
 
             workers = args.workers if args.executor == "local" else _cluster_cpus(args.address)
             print(costs.main_plan(args.budget, args.figures, workers))

@@ -26,10 +26,10 @@ from oapo_lite.envs.maps import load_maze
 from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.store import DamagedFile, read_arrays, write_frame
-from oapo_lite.study.figures import FIGURES, figure_runs, get_figure, runs_of
-from oapo_lite.study.grid import COMMITTED, SHARED_RUNS, Run
+from oapo_lite.study.catalogue.figures import FIGURES, figure_runs, get_figure, runs_of
+from oapo_lite.study.catalogue.grid import COMMITTED, SHARED_RUNS, Run
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def figures_dir(budget: str) -> Path:
@@ -98,6 +98,10 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
         raise DamagedFile(f"run file {path} is not the whole run: {at} (its evaluation steps run from "
                           f"{cfg.eval_steps[0]} to {cfg.eval_steps[-1]} every {cfg.eval_every * cfg.iteration_steps}); "
                           f"{RETRAIN}")
+    older = [c for c in results.STRUCTURE if c not in df.columns]
+    if older:  # not damaged: written before runs recorded what they are
+        raise OlderRun(f"run file {path} lacks the columns {older}, which runs record since the study stopped reading "
+                       "them from the installed engines; add them with `python -m oapo_lite.study.runs.migrate`")
     missing = [c for c in FAMILY_COLUMNS[ALGOS[cfg.algo].a2c] if c not in df.columns]
     if missing:  # what every run of its algorithm's family writes
         raise DamagedFile(f"run file {path} lacks the columns {missing} that every {cfg.algo} run writes; {RETRAIN}")
@@ -121,7 +125,11 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
     return df
 
 
-MATRICES = ("kl_matrix", "reuse_matrix", "agreement", "kl_nearest")  # per-iteration arrays, JSON in the file
+MATRICES = ("kl_matrix", "reuse_matrix", "agreement", "kl_nearest", "owner")  # per-row arrays, JSON in the file
+
+
+class OlderRun(ValueError):
+    """A whole run file written before runs recorded what they are (``results.STRUCTURE``)."""
 
 
 # the columns every run of a family writes (the PPO / TRPO family's, the A2C family's); the others
@@ -251,7 +259,7 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     ``progress``: True (a bar), "lines" (one line per run, for logs) or False."""
     from tqdm import tqdm
 
-    from oapo_lite.study import executors
+    from oapo_lite.study.runs import executors
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
@@ -327,6 +335,21 @@ def train_runs(budget: str, figures, workers: int = 2) -> None:
     if failed:
         raise RuntimeError(f"{len(failed)} run(s) of {[get_figure(f).id for f in figures]} failed "
                            "(reported above)")
+
+
+def versions(figure: str, budget: str) -> tuple:
+    """(path, modification time, size) of every run file of ``figure`` at ``budget`` (absent:
+    None): what a result computed from them is keyed by, so that it is computed again when a
+    run file changes."""
+    out = []
+    for _, cfg in figure_runs(figure, budget):
+        path = run_path(cfg, budget)
+        try:
+            stat = path.stat()
+            out.append((str(path), stat.st_mtime_ns, stat.st_size))
+        except FileNotFoundError:
+            out.append((str(path), None))
+    return tuple(out)
 
 
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from oapo_lite.study.figures.readings import (READING_NAMES, SELECTION_SEEDS, reading_curves, selection_claims,
-                                              selection_curves, sigma_on)
-from oapo_lite.study.grid import ENGINE_BUDGETS, At, Figure
-from oapo_lite.study.verdicts import RETURN, higher, paired_higher
+from oapo_lite.study.catalogue.figures.readings import (READING_NAMES, SELECTION_SEEDS, dose_claims, dose_curves,
+                                                        reading_curves, selection_claims, selection_curves, sigma_on)
+from oapo_lite.study.catalogue.grid import ENGINE_BUDGETS, At, Figure
+from oapo_lite.study.catalogue.metrics import RETURN, Metric
+from oapo_lite.study.catalogue.tests import Claim
 
 # no reuse (HAPPO), full sharing (MAPPO), gated reuse (OAPPO, a net per agent with the engines'
 # mean gate, and one net seat by seat; per type is per agent here, every leg being its own type)
@@ -24,7 +25,7 @@ MAMUJOCO_CPU = dict(n_envs=8, rollout_len=250, max_steps=1000, checkpoint_every=
 # App. A's cpu budget: 1M steps, 10% of HARL's scale; 10 episodes every 20 iterations (40k
 # steps); the studies of its settings and learner at 3 seeds
 APPA_CPU = At(steps=1_000_000, eval_every=20, eval_episodes=10, config=MAMUJOCO_CPU)
-HALFCHEETAH_1M = replace(APPA_CPU, seeds=(0, 1, 2))
+MUJOCO_1M = replace(APPA_CPU, seeds=(0, 1, 2))
 MAMUJOCO_SMOKE = At(steps=200, eval_episodes=2, config=dict(n_envs=2, rollout_len=50, max_steps=100))
 # HARL's tuned HalfCheetah 2x3 HAPPO settings, tried in our loop one at a time, then together
 HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=15), "128x3": dict(hidden=(128, 128, 128)),
@@ -32,11 +33,23 @@ HARL_HALFCHEETAH = {"clip 0.05": dict(clip=0.05), "15 epochs": dict(ppo_epochs=1
 # Eq. 9's selection here: sigma per (env, reading) by ``selection.gate_sigma``'s rule, read from
 # the ablation's always-on runs before any gated run (a test recomputes it from them)
 SELECTION_SIGMA = {(HALFCHEETAH, "agent"): 0.047}
+# the ablation's return: App. A's, with a level to reach, so that speed can be compared where the
+# final returns cannot tell the curves apart (the single-agent anchor passes it at 200k-240k steps)
+SPEED_RETURN = Metric(RETURN.column, 1000.0, RETURN.floor, RETURN.reach, RETURN.final, RETURN.tail)
 # the ablation's learner: the one ``fig_mamujoco_normalize``'s rule chose
 SELECTION_LEARNER = dict(FIGA_CURVES["happo"], normalize=True)
 # the dose-response's robot: four legs of two joints, every agent with alike spaces and three
 # peers to choose between (HalfCheetah's two agents give the gate one peer: a switch)
 ANT = "mamujoco:Ant-4x2"
+# its learner, by fig_mamujoco_normalize's rule on Ant's own seeds 0-2 (fig_ant_learner): App. A's
+# HAPPO (final IQM 805 against the normalised learner's 316)
+ANT_LEARNER = FIGA_CURVES["happo"]
+# its return with a level to reach, fixed from those seeds before any test seed ran: a round
+# number below HAPPO's final there
+ANT_RETURN = Metric(RETURN.column, 500.0, RETURN.floor, RETURN.reach, RETURN.final, RETURN.tail)
+# the dose-response's sigmas on Ant, by the rule's quantiles of the always-on runs' K
+# (``selection.gate_sigma``), read once those runs are on disk and before any gated run
+ANT_DOSE_SIGMA: dict = {}
 
 # HARL's MaMuJoCo scale: App. A's ``paper`` budget, and the reference its ``cpu`` budgets are a share of
 HARL_SCALE = At(steps=10_000_000, eval_every=25, eval_episodes=10,
@@ -53,21 +66,22 @@ FIGURES = (
                # on homogeneous agents, reusing others' experience as it is (SEAC's importance-weighted
                # reuse; MAPPO's one network on everyone's data) ends lower than using one's own
                # (HAPPO), while OAPPO's gated reuse does not
-               (higher, ("happo", "seac"), "direct reuse (SEAC) ends below no reuse (HAPPO)"),
-               (higher, ("happo", "mappo"), "full sharing (MAPPO) ends below no reuse (HAPPO)"),
+               Claim("direct reuse (SEAC) ends below no reuse (HAPPO)", "higher", ("happo", "seac")),
+               Claim("full sharing (MAPPO) ends below no reuse (HAPPO)", "higher", ("happo", "mappo")),
                *(c for r, name in FIGA_READINGS.items()
-                 for c in ((higher, (r, "seac"), f"{name} ends above direct reuse (SEAC)"),
-                           (higher, (r, "mappo"), f"{name} ends above full sharing (MAPPO)"),
+                 for c in (Claim(f"{name} ends above direct reuse (SEAC)", "higher", (r, "seac")),
+                           Claim(f"{name} ends above full sharing (MAPPO)", "higher", (r, "mappo")),
                            # the clean contrast: the same settings and initial networks per seed, reuse or none
-                           (paired_higher, (r, "happo"), f"{name} ends above no reuse (HAPPO), seed by seed")))),
+                           Claim(f"{name} ends above no reuse (HAPPO), seed by seed", "paired_higher", (r, "happo"),
+                                 headline=r == "oappo")))),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     Figure("fig_selection_mamujoco", selection_curves(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
                                                       SELECTION_LEARNER),
            common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
-               "smoke": replace(MAMUJOCO_SMOKE, seeds=(10,)), "cpu": replace(HALFCHEETAH_1M, seeds=SELECTION_SEEDS),
+               "smoke": replace(MAMUJOCO_SMOKE, seeds=(10,)), "cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS),
                "paper": HARL_SCALE},
-           metric=RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
-                                                        name="HalfCheetah 2x3")),
+           metric=SPEED_RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
+                                                              "HalfCheetah 2x3", per_env=False, metric=SPEED_RETURN)),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # Does OAPPO's early reuse (its gate is open while the untrained nets look alike) lower the
     # return? Ten seed pairs, so that an interval on the final return's difference can decide it;
@@ -83,14 +97,14 @@ FIGURES = (
                                      *((f"happo {name}", dict(algo="happo", **kw)) for name, kw in HARL_HALFCHEETAH.items()),
                                      ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
                                                                            for k, v in kw.items()}))),
-           common=dict(env=HALFCHEETAH), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
+           common=dict(env=HALFCHEETAH), runs_at=("cpu",), budgets={"cpu": MUJOCO_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # App. A's HAPPO settings on the same robot with one agent (all six joints, the full
     # observation), beside the two-leg HAPPO: what the split into two agents costs in our loop,
     # against what our PPO costs against the single-agent anchor (stable-baselines3)
     Figure("fig_single_agent", (("ppo one agent", dict(algo="happo", env="mamujoco:HalfCheetah-1x6")),
                                 ("happo two legs", dict(algo="happo", env=HALFCHEETAH))),
-           common=dict(ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
+           common=dict(ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": MUJOCO_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # App. A's HAPPO against the same with running normalisation of observations, states and
     # rewards (stable-baselines3's VecNormalize, which the single-agent anchor uses): the rule,
@@ -102,8 +116,13 @@ FIGURES = (
     # the learner on Ant 4x2, by ``fig_mamujoco_normalize``'s rule (the higher final IQM), on
     # seeds 0-2, which the dose-response does not test on
     Figure("fig_ant_learner", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
-           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": HALFCHEETAH_1M},
+           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": MUJOCO_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+    # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on Ant 4x2, seeds 10-19
+    Figure("fig_dose_mamujoco", dose_curves(ANT, tuple(ANT_DOSE_SIGMA.values()), ANT_LEARNER),
+           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS)},
+           metric=ANT_RETURN, claims=tuple(dose_claims(tuple(ANT_DOSE_SIGMA.values()), "Ant 4x2", ANT_RETURN)),
+           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     Figure("fig_readings_mamujoco", reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": At(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),

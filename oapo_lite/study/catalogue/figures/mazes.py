@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.reuse import SCHEMES
-from oapo_lite.study.grid import Figure
-from oapo_lite.study.verdicts import better, faster, higher, optimal, reliable, stuck
+from oapo_lite.study.catalogue.grid import Figure
+from oapo_lite.study.catalogue.tests import Claim
 
 SIGMAS = (0.01, 0.1, 1.0, 10.0)
 LAMBDAS = (0.2, 0.4, 0.7, 1.0)
@@ -28,42 +28,41 @@ FIGURES = (
     # can tell the step from the reuse.
     Figure("fig3b", tuple((a, dict(algo=a)) for a in ("oappo", "oatrpo", "mappo", "happo", "hatrpo")),
            common=dict(env="black_red"), claims=(
-               (stuck, ("mappo",), "MAPPO (shared parameters) stays below the optimum"),
-               (faster, ("oappo", "happo"), "OAPPO converges faster than HAPPO"),
-               (reliable, ("oappo", "happo"), "OAPPO reaches the optimum as reliably as HAPPO"),
-               (faster, ("oatrpo", "happo"), "OATRPO converges faster than HAPPO"),
-               (reliable, ("oatrpo", "happo"), "OATRPO reaches the optimum as reliably as HAPPO"),
-               (higher, ("oappo", "mappo"), "OAPPO ends above MAPPO"),
-               (higher, ("oatrpo", "mappo"), "OATRPO ends above MAPPO"),
-               (faster, ("oatrpo", "oappo"), "OATRPO converges faster than OAPPO"),
-               (reliable, ("oatrpo", "oappo"), "OATRPO reaches the optimum as reliably as OAPPO"),
-               (faster, ("oatrpo", "hatrpo"), "OATRPO converges faster than HATRPO (our control: the same step "
-                                              "without reuse)")),
+               Claim("MAPPO (shared parameters) stays below the optimum", "stuck", ("mappo",)),
+               Claim("OAPPO converges faster than HAPPO", "faster", ("oappo", "happo"), headline=True),
+               Claim("OAPPO reaches the optimum as reliably as HAPPO", "reliable", ("oappo", "happo")),
+               Claim("OATRPO converges faster than HAPPO", "faster", ("oatrpo", "happo")),
+               Claim("OATRPO reaches the optimum as reliably as HAPPO", "reliable", ("oatrpo", "happo")),
+               Claim("OAPPO ends above MAPPO", "higher", ("oappo", "mappo"), headline=True),
+               Claim("OATRPO ends above MAPPO", "higher", ("oatrpo", "mappo")),
+               Claim("OATRPO converges faster than OAPPO", "faster", ("oatrpo", "oappo")),
+               Claim("OATRPO reaches the optimum as reliably as OAPPO", "reliable", ("oatrpo", "oappo")),
+               Claim("OATRPO converges faster than HATRPO (our control: the same step without reuse)", "faster",
+                     ("oatrpo", "hatrpo"))),
            section="6.1", notebook="11_black_red_fig3b"),
     Figure("fig3c", tuple((s, dict(algo="oappo", sigma=s)) for s in SIGMAS), common=dict(env="black_red"),
-           claims=tuple((better, (TrainConfig.sigma, s), f"sigma = {TrainConfig.sigma:g} beats sigma = {s:g} ({why})")
-                        for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS)),
+           claims=tuple(Claim(f"sigma = {TrainConfig.sigma:g} beats sigma = {s:g} ({why})", "better",
+                              (TrainConfig.sigma, s)) for s, why in zip([s for s in SIGMAS if s != TrainConfig.sigma], SIGMA_REASONS)),
            section="6.1", notebook="12_sigma_lambda_fig3cd"),
     Figure("fig3d", tuple((lam, dict(algo="oappo", reuse_lambda=lam)) for lam in LAMBDAS), common=dict(env="black_red"),
            # the paper: 0.2 risks a local optimum, 1 converges later than 0.4 / 0.7, which "strike a
            # balance", 0.7 only marginally better than 0.4
-           claims=((stuck, (LAM_02,), f"lambda = {LAM_02:g} (mostly others' experience) gets stuck in a local optimum"),
-                   (optimal, (LAM_07,), f"lambda = {LAM_07:g} strikes a balance: it reaches the optimum"),
-                   (optimal, (LAM_04,), f"lambda = {LAM_04:g} strikes a balance too (0.7 only marginally better): "
-                                        "it reaches the optimum"),
-                   (faster, (LAM_07, LAM_1), f"lambda = {LAM_1:g} (own experience only) converges later than "
-                                             f"lambda = {LAM_07:g}"),
-                   (faster, (LAM_04, LAM_1), f"lambda = {LAM_1:g} (own experience only) converges later than "
-                                             f"lambda = {LAM_04:g}")),
+           claims=(Claim(f"lambda = {LAM_02:g} (mostly others' experience) gets stuck in a local optimum", "stuck",
+                         (LAM_02,)),
+                   Claim(f"lambda = {LAM_07:g} strikes a balance: it reaches the optimum", "optimal", (LAM_07,)),
+                   Claim(f"lambda = {LAM_04:g} strikes a balance too (0.7 only marginally better): it reaches the "
+                         "optimum", "optimal", (LAM_04,), headline=True),
+                   *(Claim(f"lambda = {LAM_1:g} (own experience only) converges later than lambda = {lam:g}", "faster",
+                           (lam, LAM_1)) for lam in (LAM_07, LAM_04))),
            section="6.1", notebook="12_sigma_lambda_fig3cd"),
     # A scheme fixes who may reuse whom; the KL gate is opened (sigma = inf) so that the mask
     # alone decides, as in the paper's "modified OAPPO parameters".
     Figure("fig5b", tuple((s, dict(algo="oappo", allowed=s, sigma=float("inf"), reuse_lambda=SCHEME_LAM[s]))
                           for s in SCHEMES), common=dict(env="black_blue_red"), claims=(
-               (stuck, ("UR",), "UR (red and black share) gets stuck below the optimum"),
-               (stuck, ("AR",), "AR (everyone shares) gets stuck below the optimum"),
-               (optimal, ("RR",), "RR (black and blue share) reaches the optimum"),
-               (optimal, ("NR",), "NR (no reuse) reaches the optimum")),
+               Claim("UR (red and black share) gets stuck below the optimum", "stuck", ("UR",)),
+               Claim("AR (everyone shares) gets stuck below the optimum", "stuck", ("AR",)),
+               Claim("RR (black and blue share) reaches the optimum", "optimal", ("RR",)),
+               Claim("NR (no reuse) reaches the optimum", "optimal", ("NR",))),
            section="6.1", notebook="13_black_blue_red_fig5b"),
     Figure("fig1", (("oappo", dict(algo="oappo")),), common=dict(env="black_blue_red"), seeds=1,
            section="3", notebook="14_policy_distance_fig1"),

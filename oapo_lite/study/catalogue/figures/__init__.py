@@ -4,8 +4,8 @@ figure is a new entry in its family's ``FIGURES``; ``grid`` holds the types."""
 from __future__ import annotations
 
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.study.figures import grf, mazes, mujoco, smax
-from oapo_lite.study.grid import Figure, Run
+from oapo_lite.study.catalogue.figures import grf, mazes, mujoco, smax
+from oapo_lite.study.catalogue.grid import Figure, Run
 
 GRID = (*mazes.FIGURES, *smax.FIGURES, *mujoco.FIGURES, *grf.FIGURES)
 FIGURES = tuple(f.id for f in GRID)

@@ -1,6 +1,8 @@
 """Eq. 9's selection tested on the engines: gated reuse against no reuse (HAPPO) and against
 always-on reuse (sigma = inf), seed-paired, and, where seats share a network per type, reuse
-across types against none (lambda = 1). The runs are ``grid``'s ``fig_selection_*`` figures.
+across types against none (lambda = 1); and the dose-response, the gated curve at several sigmas
+between the two ends (``dose``). The runs are the catalogue's ``fig_selection_*`` and
+``fig_dose_*`` figures; every seat-to-network map is the one each run recorded.
 
 The gate's sigma was fixed per env and reading before any gated run, by a rule that reads K
 alone, never a return (``gate_sigma``): the median of the across-network K[i, j] at the
@@ -19,20 +21,33 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from oapo_lite.envs import registry as env_registry
-from oapo_lite.neural.nets import owners
-from oapo_lite.study import experiments, figures, statistics, verdicts
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue.metrics import Metric
+from oapo_lite.study.judge.evidence import Evidence
+from oapo_lite.study.judge.statistics import iqm
+from oapo_lite.study.runs import experiments
 
 # (env, reading) -> the figure, curve label and seeds of the OAPPO runs the rule reads
 RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:6h_vs_8z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:2s3z", "type"): ("fig4_smax", "oappo type", (0, 1, 2, 3, 4)),
-             (figures.mujoco.HALFCHEETAH, "agent"): ("fig_selection_mamujoco", "oappo always", figures.readings.SELECTION_SEEDS)}
+             (figures.mujoco.HALFCHEETAH, "agent"): ("fig_selection_mamujoco", "oappo always",
+                                                     figures.readings.SELECTION_SEEDS),
+             (figures.mujoco.ANT, "agent"): ("fig_dose_mamujoco", "oappo always", figures.readings.SELECTION_SEEDS)}
 
 
-def across_pairs(kl: np.ndarray, owner: list[int]) -> np.ndarray:
+def across_pairs(kl: np.ndarray, owner) -> np.ndarray:
     """The entries K[i, j] of seats on different networks (the pairs a gate decides)."""
+    owner = np.asarray(owner, int)
     return np.asarray(kl)[~np.equal.outer(owner, owner)]
+
+
+def across_k(rows: pd.DataFrame) -> np.ndarray:
+    """Every across-network K[i, j] at the evaluated iterations of ``rows`` (each row's K read
+    against the owner map it recorded)."""
+    rows = rows[rows["kl_matrix"].notna()]
+    parts = [across_pairs(k, o) for k, o in zip(rows["kl_matrix"], rows["owner"])]
+    return np.concatenate(parts) if parts else np.zeros(0)
 
 
 def gate_sigma(env: str, reading: str, quantile: float = 0.5) -> float:
@@ -40,13 +55,9 @@ def gate_sigma(env: str, reading: str, quantile: float = 0.5) -> float:
     ``quantile``, that quantile of the same K instead of the median (the dose-response's sigmas,
     ``figures.readings.DOSE_QUANTILES``)."""
     figure, label, seeds = RULE_RUNS[env, reading]
-    values = []
-    for run in figures.runs_of(figure, "cpu"):
-        if run.label == label and run.cfg.env == env and run.cfg.seed in seeds:
-            owner = owners(run.cfg.networks_used, env_registry.agent_types(env, run.cfg.max_steps))
-            for kl in experiments.read_run(run.cfg, "cpu")["kl_matrix"].dropna():
-                values.extend(across_pairs(kl, owner))
-    return float(f"{np.quantile(values, quantile):.2g}")
+    values = [across_k(experiments.read_run(run.cfg, "cpu")) for run in figures.runs_of(figure, "cpu")
+              if run.label == label and run.cfg.env == env and run.cfg.seed in seeds]
+    return float(f"{np.quantile(np.concatenate(values), quantile):.2g}")
 
 
 def gate_use(df: pd.DataFrame, sigma_of: dict) -> pd.DataFrame:
@@ -55,11 +66,8 @@ def gate_use(df: pd.DataFrame, sigma_of: dict) -> pd.DataFrame:
     mean weight on other networks' seats (``across_share``)."""
     rows = []
     for (env, label), part in df[df["kl_matrix"].notna()].groupby(["env", "label"], sort=False):
-        cfg = part.iloc[0]
-        owner = owners(cfg["networks"] if isinstance(cfg["networks"], str) else "agent",
-                       env_registry.agent_types(env, int(cfg["max_steps"])))
-        sigma = sigma_of.get((env, label), float(cfg["sigma"]))
-        k = np.concatenate([across_pairs(m, owner) for m in part["kl_matrix"]]) if len(set(owner)) > 1 else np.zeros(0)
+        sigma = sigma_of.get((env, label), float(part["sigma"].iloc[0]))
+        k = across_k(part)
         rows.append({"env": env, "label": label, "sigma": sigma, "pair-iterations": len(k),
                      "open": float(np.mean(k <= sigma)) if len(k) else np.nan,
                      "shut": float(np.mean(k > sigma)) if len(k) else np.nan,
@@ -83,8 +91,8 @@ def summary(df: pd.DataFrame, figure: str) -> pd.DataFrame:
     use = gate_use(df, sigmas).set_index(["env", "label"]) if len(df) else pd.DataFrame()
     rows = []
     for env, sub in df.groupby("env", sort=False) if len(df) else []:
-        ev = verdicts.Evidence(sub, metric=fig.metric)
-        for label in (c for c, kw in fig.curves if kw["env"] == env and c in ev.summary.index):
+        ev = Evidence(sub, fig.metric)
+        for label in (c for c, kw in fig.curves if kw["env"] == env and c in ev.labels):
             final = ev.level(label, "final")
             rows.append({"env": env, "label": label, "seeds": int(ev.summary.loc[label, "seeds"]), "final": final.point,
                          "final_low": final.low, "final_high": final.high, "sigma": sigmas.get((env, label), np.nan),
@@ -95,23 +103,67 @@ def summary(df: pd.DataFrame, figure: str) -> pd.DataFrame:
                                        "across_share"])
 
 
+def dose(df: pd.DataFrame, figure: str) -> pd.DataFrame:
+    """The dose-response of a ``fig_dose_*`` figure, one row per curve from no reuse (HAPPO,
+    sigma 0: the gate never open) through the gated curves to always-on (sigma inf): sigma, the
+    share of across-network pair-iterations with the gate open, M's weight across networks, the
+    final value and the steps to the metric's level (IQM over seeds with 95% intervals), and the
+    seed-paired final difference against each end (IQM of the differences, its interval and on
+    how many seeds the curve was higher)."""
+    fig = figures.get_figure(figure)
+    ev = Evidence(df, fig.metric)
+    sigma = {label: float(kw.get("sigma", 0.0)) if kw.get("algo", fig.common.get("algo")) != "happo" else 0.0
+             for label, kw in fig.curves}
+    use = gate_use(df, {(e, label): sigma[label] for e, label in df[["env", "label"]].drop_duplicates().itertuples(
+        index=False)}).set_index("label") if "kl_matrix" in df else pd.DataFrame()
+    rows = []
+    for label, _ in fig.curves:
+        final, speed = ev.level(label, "final"), ev.level(label, "steps")
+        row = {"label": label, "sigma": sigma[label], "seeds": int(ev.summary.loc[label, "seeds"]),
+               "open": use["open"].get(label, np.nan) if len(use) else np.nan,
+               "across_share": use["across_share"].get(label, np.nan) if len(use) else np.nan,
+               "final": final.point, "final_low": final.low, "final_high": final.high, "steps": speed.point,
+               "steps_low": speed.low, "steps_high": speed.high,
+               "reached": int(ev.summary.loc[label, "reached"])}
+        for end, name in (("happo", "never"), ("oappo always", "always")):
+            if label != end:
+                d, pairs = ev.paired(label, end), ev.pairs(label, end)
+                row |= {f"vs {name}": d.point, f"vs {name} low": d.low, f"vs {name} high": d.high,
+                        f"higher than {name}": int((pairs["difference"] > 0).sum()), "pairs": len(pairs)}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def cpu_to_level(df: pd.DataFrame, metric: Metric, level: float) -> pd.Series:
+    """Per curve: the CPU seconds its runs had spent, by their own cost records, when the curve's
+    IQM over seeds first reached ``level`` of ``metric`` (the median over seeds of the runs' CPU
+    seconds at that evaluation; NaN: the IQM never got there)."""
+    out = {}
+    for label, part in df.groupby("label", sort=False):
+        values = part.pivot(index="step", columns="seed", values=metric.column)
+        cpu = part.pivot(index="step", columns="seed", values="cpu_s")
+        curve = pd.Series(iqm(values.to_numpy(float), axis=1), index=values.index)
+        hit = curve.index[curve >= level]
+        out[label] = float(cpu.loc[hit[0]].median()) if len(hit) else np.nan
+    return pd.Series(out, name=f"CPU-s to {metric.reach.format(level)}")
+
+
 def estimators(df: pd.DataFrame, figure: str) -> pd.DataFrame:
     """Per env and pair of a selection figure's curves trained both ways
     (``figures.readings.SAMPLED``: Algorithm 1's sampled source, Eq. 8's weights): the sampled
-    curve's final value minus the weights', seed by seed (the mean over the paired seeds with
-    its 95% interval, by the figure's metric); how often each reused across networks while it
-    learned (the share of its evaluated iterations, as the verdict rule counts it); and what
-    each and HAPPO cost: CPU seconds per 1,000 env steps, evaluations included, the median over
-    the runs' own records."""
+    curve's final value minus the weights', seed by seed (the IQM over the paired seeds with its
+    95% interval, by the figure's metric); how often each reused across networks while it learned
+    (``judge.evidence``'s reading); and what each and HAPPO cost: CPU seconds per 1,000 env steps,
+    evaluations included, the median over the runs' own records."""
     metric, rows = figures.get_figure(figure).metric, []
     for env, sub in df.groupby("env", sort=False) if len(df) else []:
-        ev = verdicts.Evidence(sub, metric=metric)
+        ev = Evidence(sub, metric)
         last = sub.sort_values("step").groupby(["label", "seed"]).tail(1)
         cost = (1000 * last["cpu_s"] / last["step"]).groupby(last["label"]).median()
         for sampled, weighted in figures.readings.SAMPLED.items():
-            if not {sampled, weighted} <= set(sub["label"]):
+            if not {sampled, weighted} <= set(ev.labels):
                 continue
-            pairs, d = verdicts.paired_difference(sub, sampled, weighted, metric.column, metric.tail)
+            pairs, d = ev.pairs(sampled, weighted), ev.paired(sampled, weighted)
             rows.append({"env": env, "sampled": sampled, "weights": weighted, "pairs": len(pairs),
                          "sampled minus weights": d.point, "low": d.low, "high": d.high,
                          "sampled higher": int((pairs["difference"] > 0).sum()),
@@ -120,23 +172,3 @@ def estimators(df: pd.DataFrame, figure: str) -> pd.DataFrame:
                          "CPU-s happo": cost.get("happo", np.nan), "CPU-s weights": cost[weighted],
                          "CPU-s sampled": cost[sampled]})
     return pd.DataFrame(rows)
-
-
-def estimator_sentence(row: pd.Series, figure: str) -> str:
-    """One line of ``estimators``'s table in words: the paired difference, read against 0, how
-    often each curve reused, and what each cost against HAPPO. Where either curve reused across
-    networks at fewer than ``verdicts.REUSE_PART`` of its evaluated iterations, the pair compares
-    no estimator of reuse, and the line says so."""
-    d = statistics.Interval(row["sampled minus weights"], row["low"], row["high"])
-    side = ("" if np.isnan(d.low) else "wholly above 0; " if d.low > 0 else "wholly below 0; " if d.high < 0 else
-            "interval across 0; ")
-    sampled, weights = (row[f"CPU-s {way}"] / row["CPU-s happo"] for way in ("sampled", "weights"))
-    few = [way for way in ("sampled", "weights") if row[f"reused {way}"] < verdicts.REUSE_PART]
-    hardly = (f"; {' and '.join({'sampled': 'the sampled curve', 'weights': 'the weights curve'}[w] for w in few)} "
-              f"reused at below {verdicts.REUSE_PART:.0%}, so the pair compares no estimator of reuse" if few else "")
-    return (f"{row['env']}, {row['weights']}: Algorithm 1's sampled source minus Eq. 8's weights, "
-            f"{figures.get_figure(figure).metric.final} paired over {row['pairs']} seeds: {d.fmt()} ({side}sampled "
-            f"higher on {row['sampled higher']} of {row['pairs']}); reused across networks at "
-            f"{row['reused sampled']:.1%} of the evaluated iterations while learning sampled, "
-            f"{row['reused weights']:.1%} with the weights{hardly}; CPU per env step "
-            f"{sampled:.2f}x HAPPO's sampled, {weights:.2f}x with the weights")

@@ -3,7 +3,8 @@ each gate statistic of Eq. 9, and the ablation that tests Eq. 9's selection (``s
 from __future__ import annotations
 
 from oapo_lite.reuse import KL_REDUCES
-from oapo_lite.study.verdicts import paired_higher, selects
+from oapo_lite.study.catalogue.metrics import Metric
+from oapo_lite.study.catalogue.tests import Claim
 
 # ten seeds that chose no setting (the sweep used 0-2, Fig. 4 and the sigma rule 0-4, the
 # early-reuse study 0-9)
@@ -78,19 +79,40 @@ def dose_label(sigma: float) -> str:
     return f"oappo sigma={sigma:g}"
 
 
-def selection_claims(env: str, sigma: dict, prefix: str = "", name: str | None = None) -> list:
-    """The ablation's claims on ``env`` (each led by the env without ``prefix``, for a figure
-    whose claims are per env; else named ``name``): does reuse help, does selection, and across
-    types."""
-    name = name or env.removeprefix(prefix)
-    out = [(paired_higher, ("oappo always", "happo"), f"{name}: always-on reuse ends above no reuse")]
+def selection_claims(env: str, sigma: dict, name: str, per_env: bool, metric: Metric) -> list[Claim]:
+    """The ablation's claims on ``env`` (named ``name``; judged on that env's runs alone where
+    ``per_env``): does reuse help, does selection, and across types; each on the final value
+    seed by seed and on the speed to ``metric``'s threshold, which tells the curves apart where
+    their final values sit at a ceiling."""
+    on, reach = (env if per_env else None), f"reaches {metric.reach.format(metric.threshold)}"
+    out = []
     if "agent" in sigma:
-        out = [(paired_higher, ("oappo gated", "happo"), f"{name}: gated reuse (a net per agent, sigma "
-                                                          f"{sigma['agent']:g}) ends above no reuse (HAPPO)"),
-               (selects, ("oappo gated", "oappo always"), f"{name}: gated reuse ends above always-on reuse "
-                                                                 "(selection helps)"), *out]
+        gated = f"gated reuse (a net per agent, sigma {sigma['agent']:g})"
+        out += [Claim(f"{name}: {gated} ends above no reuse (HAPPO)", "paired_higher", ("oappo gated", "happo"), on),
+                Claim(f"{name}: {gated} {reach} before no reuse", "faster", ("oappo gated", "happo"), on),
+                *selection_of("oappo gated", gated, name, on, reach)]
+    out += [Claim(f"{name}: always-on reuse ends above no reuse", "paired_higher", ("oappo always", "happo"), on),
+            Claim(f"{name}: always-on reuse {reach} before no reuse", "faster", ("oappo always", "happo"), on)]
     if "type" in sigma:
-        out.append((paired_higher, ("oappo type gated", "oappo type own type"),
-                    f"{name}: a net per type reusing across types through the gate (sigma "
-                    f"{sigma['type']:g}) ends above one reusing within its type only"))
-    return [(name, *c) if prefix else c for c in out]
+        across = f"a net per type reusing across types through the gate (sigma {sigma['type']:g})"
+        out += [Claim(f"{name}: {across} ends above one reusing within its type only", "paired_higher",
+                      ("oappo type gated", "oappo type own type"), on),
+                Claim(f"{name}: {across} {reach} before one reusing within its type only", "faster",
+                      ("oappo type gated", "oappo type own type"), on)]
+    return out
+
+
+def selection_of(label: str, gated: str, name: str, env: str | None, reach: str) -> list[Claim]:
+    """The claim that the gated curve ``label`` selects: it ends above both no reuse (HAPPO) and
+    always-on reuse, and ``reach``es (the metric's threshold) before both."""
+    ends = ("happo", "oappo always")
+    return [Claim(f"{name}: {gated} ends above both no reuse and always-on reuse (selection helps)", "selects",
+                  (label, *ends), env),
+            Claim(f"{name}: {gated} {reach} before both no reuse and always-on reuse", "selects_faster",
+                  (label, *ends), env)]
+
+
+def dose_claims(sigmas: tuple[float, ...], name: str, metric: Metric) -> list[Claim]:
+    """The dose-response's claims: at each sigma, does the gate select (``selection_of``)."""
+    reach = f"reaches {metric.reach.format(metric.threshold)}"
+    return [c for s in sigmas for c in selection_of(dose_label(s), f"gated reuse at sigma {s:g}", name, None, reach)]

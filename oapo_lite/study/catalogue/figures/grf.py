@@ -2,8 +2,9 @@
 project has, on four academy scenarios."""
 from __future__ import annotations
 
-from oapo_lite.study.grid import ENGINE_BUDGETS, At, Figure
-from oapo_lite.study.verdicts import SCORE, higher, optimal
+from oapo_lite.study.catalogue.grid import ENGINE_BUDGETS, At, Figure
+from oapo_lite.study.catalogue.metrics import SCORE
+from oapo_lite.study.catalogue.tests import Claim
 
 FIG6B_ALGOS = ("oappo", "oatrpo", "mappo", "happo", "seac", "seps")
 GRF_SCENARIOS = ("pass_and_shoot_with_keeper", "3_vs_1_with_keeper", "counterattack_easy", "counterattack_hard")
@@ -13,9 +14,10 @@ GRF_HARL = dict(hidden=(64, 64), ppo_epochs=15, n_minibatch=2, clip=0.2, max_ste
 # only, nearly perfect); OAPPO and OATRPO are best on the counterattacks (each ends above every
 # other algorithm of the table).
 GRF_CLAIMS = (
-    *((s, optimal, ("happo",), f"{s}: own experience alone (HAPPO) scores nearly perfectly")
+    *(Claim(f"{s}: own experience alone (HAPPO) scores nearly perfectly", "optimal", ("happo",), f"grf:academy_{s}")
       for s in GRF_SCENARIOS[:2]),
-    *((s, higher, (ours, other), f"{s}: {ours.upper()} ends above {other.upper()}")
+    *(Claim(f"{s}: {ours.upper()} ends above {other.upper()}", "higher", (ours, other), f"grf:academy_{s}",
+            headline=(ours, other) == ("oappo", "mappo"))
       for s in GRF_SCENARIOS[2:] for ours in ("oappo", "oatrpo") for other in ("mappo", "happo", "seac", "seps")),
 )
 

@@ -40,8 +40,9 @@ from oapo_lite.neural.rollout import make_env
 from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
 from oapo_lite.store import atomic_write, write_frame
-from oapo_lite.study import experiments, figures
-from oapo_lite.study.verdicts import REUSE_PART
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.judge.evidence import REUSE_PART
 
 DATA = experiments.data_dir("cpu") / "gate_statistic"
 ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", figures.mujoco.HALFCHEETAH)
