@@ -22,6 +22,7 @@ import torch
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.results import COST, STRUCTURE
+from oapo_lite.neural.runstate import load_checkpoint
 from oapo_lite.neural.train import train
 from oapo_lite.study.catalogue import figures
 
@@ -67,8 +68,7 @@ def run_hashes(algo: str, env: str, **reading) -> tuple[str, str]:
         # was recorded later, and is no number of its learning
         keep = [i for i, name in enumerate(rows[0]) if name != "git_rev" and name not in COST + STRUCTURE]
         results = hashlib.sha256(repr([[r[i] for i in keep] for r in rows]).encode()).hexdigest()[:16]
-        ckpt = next(Path(out).rglob("*.pt"))
-        return results, tensor_hash(torch.load(ckpt, weights_only=False))
+        return results, tensor_hash(load_checkpoint(out))
 
 
 def main() -> None:

@@ -945,7 +945,7 @@ def test_a_checkpoint_missing_or_garbling_an_entry_is_damaged_named_and_trained_
     cfg = TrainConfig(algo="oappo", **SMALL)
     first, _ = train_job(cfg, str(tmp_path))
     path = tmp_path / "checkpoint.pt"
-    torch.save(_ck_damage(kind)(torch.load(path, weights_only=False)), path)
+    torch.save(_ck_damage(kind)(load_checkpoint(tmp_path)), path)
     with pytest.raises(store.DamagedFile, match=f"checkpoint {re.escape(str(path))} .*{re.escape(words)}"):
         train(cfg, tmp_path, progress=False)
     again, error = train_job(cfg, str(tmp_path))  # reproduce's way: named, then trained again from the start

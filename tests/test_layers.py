@@ -36,7 +36,7 @@ def room(module: str) -> str | None:
 def imports(path: Path, root: Path, modules: set[str]) -> set[str]:
     """The package's modules that ``path`` imports: at the top or inside a function, by a string
     naming the module (an engine table's), and the ``__init__`` of every package on the way
-    that is not one of its own. ``from oapo_lite.study import grid`` imports ``oapo_lite.study.grid``."""
+    that is not one of its own. ``from oapo_lite.study.catalogue import grid`` imports ``oapo_lite.study.catalogue.grid``."""
     me, found = module_name(path, root), set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in modules:

@@ -19,6 +19,7 @@ import io
 import math
 import multiprocessing as mp
 import os
+import pickle
 import warnings
 import weakref
 
@@ -123,9 +124,35 @@ class _Copies:
                 "returns": self.returns.copy(), "scored": self.scored.copy()}
 
     def set_state(self, d: dict) -> None:
-        for env, s in zip(self.envs, d["engines"]):
-            env.set_state(s)
+        with _engine_pickles_as_data():
+            for env, s in zip(self.envs, d["engines"]):
+                env.set_state(s)
         self.t, self.returns, self.scored = d["t"].copy(), d["returns"].copy(), d["scored"].copy()
+
+
+class _EngineUnpickler(pickle.Unpickler):
+    """gfootball's ``set_state`` unpickles a pickle that its ``get_state`` put in the engine's
+    snapshot: its own ``EnvState`` (three counters) and the reward wrapper's dict. The snapshot
+    comes from a checkpoint, which is data (``runstate``), so nothing else may be built from it."""
+
+    ALLOWED = {("gfootball.env.football_env_core", "EnvState")}
+
+    def find_class(self, module: str, name: str):
+        if (module, name) not in self.ALLOWED:
+            raise pickle.UnpicklingError(f"a GRF engine state may hold gfootball's EnvState only, not {module}.{name}")
+        return super().find_class(module, name)
+
+
+@contextlib.contextmanager
+def _engine_pickles_as_data():
+    """``pickle.loads`` as ``_EngineUnpickler`` meanwhile: gfootball calls it by that name
+    (``six.moves.cPickle`` is ``pickle``), inside a worker that does nothing else at the time."""
+    loads = pickle.loads
+    pickle.loads = lambda data, **_: _EngineUnpickler(io.BytesIO(data)).load()
+    try:
+        yield
+    finally:
+        pickle.loads = loads
 
 
 def _worker(conn, name: str, seeds: list[int], max_steps: int) -> None:

@@ -84,8 +84,8 @@ def env_fn(name: str, max_steps: int):
 
 class MaMuJoCoVec(PettingZooVec):
     """``PettingZooVec`` that steps each copy's single-agent MuJoCo env directly, and whose
-    checkpoints hold every copy's MuJoCo data, random generator and time-limit counter
-    (MaMuJoCo envs keep lambdas and cannot be pickled whole).
+    checkpoints hold every copy's MuJoCo data as arrays (``_physics``), random generator and
+    time-limit counter (MaMuJoCo envs keep lambdas and C objects: no snapshot of the whole).
 
     MaMuJoCo's own ``step`` rebuilds every agent's observation from the MuJoCo data, joint by
     joint, in Python; yet an agent's observation is a fixed selection of the single-agent
@@ -158,20 +158,55 @@ class MaMuJoCoVec(PettingZooVec):
 def _copy_state(env) -> dict:
     limit = env.single_agent_env  # gymnasium.make puts the TimeLimit outermost
     sim = limit.unwrapped
-    # the whole MjData, not just qpos / qvel: rewards read quantities (body positions) that
-    # mj_step leaves one substep stale, and recomputing them would change the next reward
-    return {"data": copy.deepcopy(sim.data), "rng": copy.deepcopy(sim.np_random.bit_generator.state),
+    return {"physics": _physics(sim), "rng": copy.deepcopy(sim.np_random.bit_generator.state),
             "elapsed": limit._elapsed_steps, "agents": list(env.agents)}
 
 
 def _set_copy_state(env, state: dict) -> None:
-    import mujoco
-
     limit = env.single_agent_env
     sim = limit.unwrapped
-    mujoco.mj_copyData(sim.data, sim.model, state["data"])
+    _set_physics(sim, state["physics"])
     sim.np_random.bit_generator.state = copy.deepcopy(state["rng"])
-    limit._elapsed_steps, env.agents = state["elapsed"], list(state["agents"])
+    limit._elapsed_steps, env.agents = int(state["elapsed"]), [str(a) for a in state["agents"]]
+
+
+def _physics(sim) -> dict:
+    """A copy's MjData as data: MuJoCo's integration state (time, positions, velocities,
+    controls, warm start, ...), and every float array of the data. The integration state alone
+    is not enough: rewards read quantities (body positions) that mj_step leaves one substep
+    stale, and recomputing them from the state changed Ant's first reward after a restore."""
+    import mujoco
+
+    state = np.empty(mujoco.mj_stateSize(sim.model, mujoco.mjtState.mjSTATE_INTEGRATION))
+    mujoco.mj_getState(sim.model, sim.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+    return {"state": state, "floats": {name: value.copy() for name, value in _float_arrays(sim.data)}}
+
+
+def _set_physics(sim, physics: dict) -> None:
+    """Write ``_physics``'s output into a copy's MjData. Integer arrays (indices, counts) are
+    left to MuJoCo: the next mj_step rebuilds them, and a checkpoint's values never index its
+    memory. Arrays sized by the contacts and constraints of the saved moment (efc_*, island_*)
+    differ in shape from this data's when their number differs; mj_step rebuilds them before
+    reading them, so they are skipped (a resumed Ant and HalfCheetah continue bit for bit)."""
+    import mujoco
+
+    floats = dict(_float_arrays(sim.data))
+    unknown = sorted(set(physics["floats"]) - set(floats))
+    if unknown:
+        raise ValueError(f"MuJoCo state has float arrays {unknown} that this MjData lacks")
+    mujoco.mj_setState(sim.model, sim.data, np.asarray(physics["state"], np.float64),
+                       mujoco.mjtState.mjSTATE_INTEGRATION)
+    for name, value in physics["floats"].items():
+        if floats[name].shape == np.shape(value):
+            floats[name][...] = value
+
+
+def _float_arrays(data):
+    """(name, live view) of every float64 array field of an MjData."""
+    for name in dir(data):
+        value = None if name.startswith("_") else getattr(data, name)
+        if isinstance(value, np.ndarray) and value.dtype == np.float64:
+            yield name, value
 
 
 def make_vec(name: str, n_envs: int, seed: int, max_steps: int) -> MaMuJoCoVec:

@@ -10,6 +10,10 @@ from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
+# the numpy kinds a checkpoint may hold (``runstate.DATA``): booleans, integers, floats, complex
+# numbers and fixed-width strings; not objects
+DATA_KINDS = "biufcUS"
+
 
 @dataclass
 class VecStep:
@@ -60,7 +64,8 @@ class VecEnv(Protocol):
         """``actions`` (n_envs, n_agents[, n_actions])."""
 
     def get_state(self) -> object:
-        """Everything random or running, for checkpoints."""
+        """Everything random or running, for checkpoints: data only (numbers, strings, bytes,
+        containers, numpy arrays of ``DATA_KINDS``), no objects."""
 
     def set_state(self, state: object) -> None: ...
 

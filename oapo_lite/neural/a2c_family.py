@@ -256,10 +256,12 @@ class A2CFamilyLearner:
                  {k: round(v, 4) for k, v in self.db_scores.items()})
 
     def state_dict(self) -> dict:
-        return {"a2c": self.a2c.state_dict(), "owner": self.owner, "buffer": self.buffer,
-                "embeddings": self.embeddings, "db_scores": self.db_scores}
+        return {"a2c": self.a2c.state_dict(), "owner": self.owner,
+                "buffer": None if self.buffer is None else self.buffer.parts, "embeddings": self.embeddings,
+                "db_scores": self.db_scores}
 
     def load_state_dict(self, state: dict) -> None:
         self.a2c.load_state_dict(state["a2c"])
-        self.owner, self.buffer = state["owner"], state["buffer"]
+        self.owner = state["owner"]
+        self.buffer = None if state["buffer"] is None else seps.Buffer(state["buffer"])
         self.embeddings, self.db_scores = state["embeddings"], state["db_scores"]

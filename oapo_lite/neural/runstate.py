@@ -1,14 +1,19 @@
 """A run's state between iterations, and the files that keep it: ``RunState`` holds everything
 that carries over (env, actors, learner, generators, history, evaluation rows); its
-``state_dict`` *is* the checkpoint, so what is saved and what is resumed cannot drift apart."""
+``state_dict`` *is* the checkpoint, so what is saved and what is resumed cannot drift apart.
+
+A checkpoint is data: tensors, numbers, strings, bytes, lists, tuples, dicts and sets, numpy
+arrays and scalars of booleans, numbers and strings. It is read with torch's restricted
+unpickler (``weights_only=True``), which builds nothing but those (``DATA``): a run folder
+someone else wrote or changed can hold wrong numbers, never code that runs when it is read."""
 from __future__ import annotations
 
 import dataclasses
 import json
 import os
 import pickle
+import re
 import subprocess
-import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +22,8 @@ import pandas as pd
 import torch
 
 from oapo_lite.algorithms import ALGOS
+from oapo_lite.envs.vec import DATA_KINDS, VecStep
+from oapo_lite.neural import seps
 from oapo_lite.neural.a2c_family import A2CFamilyLearner
 from oapo_lite.neural.config import TrainConfig, derive_seed
 from oapo_lite.neural.learner import Learner
@@ -28,19 +35,28 @@ from oapo_lite.neural.seps import group_labels
 from oapo_lite.store import DamagedFile, atomic_write, write_frame
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
-# a SePS checkpoint written during pre-training before the modules moved into the layer folders
-# pickled its buffer by the old path (the only object of a moved module a checkpoint holds)
-MOVED = {"oapo_lite.seps": "oapo_lite.neural.seps"}
 # the keys under which a checkpoint before the layer folders kept its learner's state: the PPO family's at the top
 PPO_KEYS_BEFORE = ("critic", "value_norm", "critic_opt", "np_rng")
 
+# What a numpy array or scalar is pickled with beyond torch's own types: the functions that
+# rebuild them, and the dtypes they may have: booleans, integers, floats, complex numbers and
+# fixed-width strings, in every width numpy names (an object dtype would hold objects: left out).
+# torch pickles with protocol 2, which writes empty bytes (an empty array's data) as a call of
+# bytes(), and a frozenset as a call of frozenset
+DATA_DTYPES = sorted({type(np.dtype(c)) for c in np.typecodes["All"] if np.dtype(c).kind in DATA_KINDS},
+                     key=lambda t: t.__name__)
+DATA = [np.ndarray, np.dtype, np.zeros(0).__reduce__()[0], np.float64(0).__reduce__()[0], bytes, frozenset,
+        *DATA_DTYPES]
+# The two objects a checkpoint written before issue 54 holds, read only to be turned into data
+# (``_from_old_layout``): the envs' last step, and SePS's buffer during pre-training (before
+# issue 35 pickled by the module's old path)
+OLD_LAYOUT = [VecStep, seps.Buffer, (seps.Buffer, "oapo_lite.seps.Buffer")]
+ALLOWED = DATA + OLD_LAYOUT
 
-class _Unpickler(pickle.Unpickler):
-    def find_class(self, module: str, name: str):
-        return super().find_class(MOVED.get(module, module), name)
 
-
-_PICKLE = types.SimpleNamespace(Unpickler=_Unpickler, load=pickle.load, __name__="pickle")
+def allowed_names(entries: list = ALLOWED) -> list[str]:
+    """The names pickles give ``entries`` (by default every global a checkpoint may name beyond torch's own)."""
+    return [entry[1] if isinstance(entry, tuple) else f"{entry.__module__}.{entry.__qualname__}" for entry in entries]
 
 
 def git_revision() -> str:
@@ -100,8 +116,8 @@ class RunState:
     def state_dict(self) -> dict:
         return {"config": self.cfg.flat(), "iteration": self.iteration, "actors": self.actors.state_dict(),
                 "learner": self.learner.state_dict(), "act_gen": self.act_gen.get_state(), "torch_rng": torch.get_rng_state(),
-                "env": self.env.get_state(), "step": self.step, "history": self.history, "rows": self.rows,
-                "cost": self.cost}
+                "env": self.env.get_state(), "step": dataclasses.asdict(self.step), "history": self.history,
+                "rows": self.rows, "cost": self.cost}
 
     def load_state_dict(self, ck: dict, path: Path | str = "") -> None:
         """Continue from checkpoint ``ck`` (``check_resumable`` first). A run extended to more
@@ -115,7 +131,7 @@ class RunState:
             self.act_gen.set_state(ck["act_gen"])
             torch.set_rng_state(ck["torch_rng"])
             self.env.set_state(ck["env"])
-            self.iteration, self.step, self.history = ck["iteration"], ck["step"], ck["history"]
+            self.iteration, self.step, self.history = ck["iteration"], VecStep(**ck["step"]), ck["history"]
             self.cost = ck.get("cost")  # absent: the run so far was not measured
         except KeyError as err:
             raise ValueError(f"{name} has no entry {err} (written by an older oapo_lite); {START_AFRESH}") from None
@@ -148,28 +164,60 @@ def save_results(rows: list[dict], out: Path) -> None:
 
 
 def load_checkpoint(out_dir: str | Path) -> dict:
-    """The last checkpoint of a run directory (parameters, optimisers, RNG states, metrics);
-    ``store.DamagedFile`` naming it if it cannot be read."""
+    """The last checkpoint of a run directory (parameters, optimisers, RNG states, metrics), read
+    as data only (``read_data``); ``store.DamagedFile`` naming it if it cannot be read or holds
+    anything else."""
     path = Path(out_dir) / "checkpoint.pt"
-    try:
-        ck = torch.load(path, weights_only=False, pickle_module=_PICKLE)
-    except (FileNotFoundError, PermissionError):  # absent or unreadable, not damaged: starting afresh would lose it
-        raise
-    except (ModuleNotFoundError, AttributeError) as err:  # pickled objects of a module since moved or renamed
-        if "oapo_lite" not in str(err):
-            raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {err}); "
-                              f"{START_AFRESH}") from None
-        raise ValueError(f"checkpoint {path} was written by an older oapo_lite ({err}); {START_AFRESH}") from None
-    except Exception as err:  # truncated, empty or foreign bytes: torch and pickle raise many kinds
-        detail = str(err).split(". ")[0][:120] or "no detail"
-        raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {detail}); "
-                          f"{START_AFRESH}") from None
+    ck = read_data(path)
     if not isinstance(ck, dict) or "config" not in ck:
         raise DamagedFile(f"checkpoint {path} is not an oapo_lite checkpoint; {START_AFRESH}")
+    _from_old_layout(ck)
     why = _inconsistent(ck)
     if why:
         raise DamagedFile(f"checkpoint {path} is damaged: {why}; {START_AFRESH}")
     return ck
+
+
+def read_data(path: Path) -> object:
+    """What ``torch.save`` wrote to ``path``, built by torch's restricted unpickler from data
+    alone (``ALLOWED``); ``store.DamagedFile`` naming the file, and the types it refused if it
+    holds others: nothing in such a file is run."""
+    try:
+        with torch.serialization.safe_globals(ALLOWED):
+            return torch.load(path, weights_only=True)
+    except (FileNotFoundError, PermissionError):  # absent or unreadable, not damaged: starting afresh would lose it
+        raise
+    except Exception as err:  # truncated, empty or foreign bytes, or types beyond ALLOWED: torch raises many kinds
+        refused = _refused(path, str(err)) if isinstance(err, pickle.UnpicklingError) else []
+        if refused:
+            raise DamagedFile(f"checkpoint {path} holds {refused}, which a checkpoint may not hold (it is read as data "
+                              f"only: tensors, numbers, strings, lists, dicts, numpy arrays); nothing in it was run; "
+                              f"{START_AFRESH}") from None
+        detail = str(err).split(". ")[0][:120] or "no detail"
+        raise DamagedFile(f"checkpoint {path} is damaged and cannot be read ({type(err).__name__}: {detail}); "
+                          f"{START_AFRESH}") from None
+
+
+def _refused(path: Path, error: str) -> list[str]:
+    """The types or functions the restricted unpickler refused in ``path``: the globals its
+    pickle names beyond ``ALLOWED`` (listed without unpickling anything), else the class torch's
+    error says it would not build."""
+    try:
+        named = [g for g in torch.serialization.get_unsafe_globals_in_checkpoint(path) if g not in allowed_names()]
+    except Exception:  # not a zip of a pickle: torch's error says what was wrong
+        named = []
+    return named or re.findall(r"(?:Unsupported global: GLOBAL |but got <class ')([\w.]+)", error)
+
+
+def _from_old_layout(ck: dict) -> None:
+    """A checkpoint written before issue 54 in place as data: the envs' last step was a
+    ``VecStep`` and SePS's pre-training buffer a ``seps.Buffer``; both become what
+    ``RunState.state_dict`` writes now."""
+    if isinstance(ck.get("step"), VecStep):
+        ck["step"] = dict(vars(ck["step"]))
+    for learner in (ck.get("learner"), ck.get("a2c")):  # "a2c": the layout before issue 35
+        if isinstance(learner, dict) and isinstance(learner.get("buffer"), seps.Buffer):
+            learner["buffer"] = getattr(learner["buffer"], "parts", learner["buffer"])
 
 
 # what every checkpoint holds (the learner's state under "learner", or, before it had one, its
@@ -187,7 +235,7 @@ def _inconsistent(ck: dict) -> str | None:
         return f"it has no entries {missing}"
     kinds = {"config": dict, "actors": dict, "act_gen": torch.Tensor, "torch_rng": torch.Tensor}
     wrong = [k for k, kind in kinds.items() if not isinstance(ck[k], kind)]
-    wrong += [] if dataclasses.is_dataclass(ck["step"]) else ["step"]
+    wrong += [] if isinstance(ck["step"], dict) else ["step"]
     wrong += [] if ck["env"] is not None else ["env"]
     wrong += [] if ck.get("cost") is None or (isinstance(ck["cost"], dict) and all(
         isinstance(ck["cost"].get(k), float) and ck["cost"][k] >= 0 for k in ("cpu_s", "wall_s"))) else ["cost"]
@@ -233,7 +281,7 @@ def check_resumable(cfg: TrainConfig, ck: dict, name: str = "checkpoint") -> Non
     differ = [k for k in now if k != "steps" and str(now[k]) != str(saved[k])]
     if differ:
         raise ValueError(f"{name} was written by a different config (fields {differ}); {START_AFRESH}")
-    stale = [f.name for f in dataclasses.fields(ck["step"]) if not hasattr(ck["step"], f.name)]
+    stale = [f.name for f in dataclasses.fields(VecStep) if f.name not in ck["step"]]
     if stale:
         raise ValueError(f"{name}'s environment step has no fields {stale} (written by an older oapo_lite); "
                          f"{START_AFRESH}")

@@ -143,10 +143,13 @@ def group_labels(names: str, agents) -> list[int]:
 
 
 class Buffer:
-    """The pre-training transitions (o, a, o', r, agent id), only where the agent acted."""
+    """The pre-training transitions (o, a, o', r, agent id), only where the agent acted; ``parts``
+    (a list of tuples of numpy arrays) is its state in a checkpoint."""
 
-    def __init__(self):
-        self.parts: list[tuple] = []
+    def __init__(self, parts: list | None = None):
+        if parts is not None and not isinstance(parts, list):
+            raise TypeError(f"SePS's buffer holds a list of transition parts, got a {type(parts).__name__}")
+        self.parts: list[tuple] = [] if parts is None else parts
 
     def record(self, obs: torch.Tensor, act: torch.Tensor, next_obs: torch.Tensor, reward: torch.Tensor,
                active: torch.Tensor | None) -> None:

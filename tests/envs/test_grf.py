@@ -4,6 +4,9 @@ Tests that need the engine skip where it is not installed, except in CI (``CI`` 
 ``make test`` installs it first, so a missing engine fails instead of passing vacuously.
 """
 import os
+import pickle
+import sys
+import types
 
 import numpy as np
 import pytest
@@ -38,6 +41,37 @@ def test_a_missing_engine_gives_the_install_command_not_a_traceback(monkeypatch,
 def test_copy_seeds_differ_between_copies_and_runs():
     seeds = {grf.copy_seed(s, k) for s in range(4) for k in range(8)}
     assert len(seeds) == 32 and all(0 <= x < 2**31 for x in seeds)
+
+
+class _Planted:
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return os.system, (f"touch {self.marker}",)
+
+
+def test_an_engine_state_from_a_checkpoint_unpickles_gfootballs_envstate_and_nothing_else(monkeypatch, tmp_path):
+    """gfootball's set_state calls ``pickle.loads`` on a pickle its get_state put in the engine's
+    snapshot; while ``_Copies.set_state`` runs, that builds gfootball's ``EnvState`` and data
+    only. (A stand-in module plays gfootball's, so this runs without the engine.)"""
+    names = ("gfootball", "gfootball.env", "gfootball.env.football_env_core")
+    for name in names:
+        monkeypatch.setitem(sys.modules, name, types.ModuleType(name))
+    env_state = type("EnvState", (), {"__module__": names[-1]})
+    sys.modules[names[-1]].EnvState = env_state
+    state = env_state()
+    state.previous_score_diff = 1
+    good = pickle.dumps({"FootballEnvCore": state, "CheckpointRewardWrapper": {3: 1}})
+    marker = tmp_path / "ran"
+    bad = pickle.dumps({"FootballEnvCore": _Planted(marker)})
+    loads = pickle.loads
+    with grf._engine_pickles_as_data():
+        back = pickle.loads(good)
+        with pytest.raises(pickle.UnpicklingError, match=f"EnvState only, not {os.system.__module__}.system"):
+            pickle.loads(bad)
+    assert type(back["FootballEnvCore"]) is env_state and vars(back["FootballEnvCore"]) == vars(state)
+    assert back["CheckpointRewardWrapper"] == {3: 1} and not marker.exists() and pickle.loads is loads
 
 
 def _rollout(seed: int, steps: int, n_envs: int = 3, workers: int = 2):

@@ -10,7 +10,7 @@ from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.nets import Actors
 from oapo_lite.neural.results import learning
 from oapo_lite.neural.rollout import collect
-from oapo_lite.neural.runstate import load_checkpoint
+from oapo_lite.neural.runstate import load_checkpoint, read_data
 from oapo_lite.neural.train import train
 
 import fakes
@@ -80,17 +80,26 @@ def test_the_direct_step_equals_pettingzoo_step_bit_for_bit(name):
     assert ends >= 6  # every copy ended (and was reset) at least twice: at step 30 and step 60
 
 
-def test_get_state_set_state_continues_bit_exactly():
-    vec = registry.make_vec("mamujoco:Ant-2x4", n_envs=2, seed=3, max_steps=30)
+def test_get_state_set_state_continues_bit_exactly(tmp_path):
+    """The state goes through a checkpoint file as data (``runstate.read_data``) into fresh copies
+    stepped elsewhere (Ant's contacts then differ in number: other MjData arrays' shapes)."""
+    def make():
+        return registry.make_vec("mamujoco:Ant-2x4", n_envs=2, seed=3, max_steps=30)
+
+    vec = make()
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (40, 2, 2, 4)).astype(np.float32)
     vec.reset()
     for a in actions[:25]:
         vec.step(a)
-    saved = vec.get_state()
+    torch.save(vec.get_state(), tmp_path / "state.pt")
     first = [vec.step(a) for a in actions[25:]]  # crosses the 30-step limit: reset and its randomness
-    vec.set_state(saved)
-    again = [vec.step(a) for a in actions[25:]]
+    fresh = make()
+    fresh.reset()
+    for a in actions[:3]:
+        fresh.step(a)
+    fresh.set_state(read_data(tmp_path / "state.pt"))
+    again = [fresh.step(a) for a in actions[25:]]
     assert any(s.truncated.any() for s in first)
     for x, y in zip(first, again):
         for field in ("obs", "state", "reward", "truncated", "final_obs"):

@@ -13,6 +13,7 @@ from oapo_lite.neural.nets import Actors
 from oapo_lite.neural.ppo_family import LearnerBatch, learner_dists, source_gradients
 from oapo_lite.neural.results import learning
 from oapo_lite.neural.rollout import collect, make_env
+from oapo_lite.neural.runstate import load_checkpoint
 from oapo_lite.neural.train import train
 
 torch.set_num_threads(1)
@@ -222,5 +223,5 @@ def test_adaptive_with_nothing_admissible_is_bitwise_happo(tmp_path):
     train(TrainConfig(algo="happo", **SMALL_BR), tmp_path / "happo", resume=False, progress=False)
     train(TrainConfig(algo="oappo", sigma=0.0, reuse_adapt="gradient", **SMALL_BR), tmp_path / "adapt",
           resume=False, progress=False)
-    a, b = (torch.load(tmp_path / name / "checkpoint.pt", weights_only=False)["actors"] for name in ("happo", "adapt"))
+    a, b = (load_checkpoint(tmp_path / name)["actors"] for name in ("happo", "adapt"))
     assert all(torch.equal(a[key], b[key]) for key in a)

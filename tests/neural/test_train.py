@@ -1,10 +1,14 @@
 """The training loop: algorithm identities, learning, determinism, resume, and the PettingZoo path."""
 import copy
 import dataclasses
+import json
 import math
 import shutil
+import signal
+import subprocess
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -17,7 +21,7 @@ from oapo_lite import __main__ as cli, reuse
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.envs import MAPS, MazeParallelEnv, make_vec, parse_maze
 from oapo_lite.envs.pettingzoo_vec import PettingZooVec
-from oapo_lite.envs.vec import seat_spaces
+from oapo_lite.envs.vec import VecStep, seat_spaces
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural import seps
 from oapo_lite.neural.nets import Actors, Categorical
@@ -124,6 +128,34 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path, algo):
               tmp_path / "full", progress=False)
 
 
+KILLED = """
+import json, os, signal, sys
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.train import train
+fields, out, at = json.loads(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+train(TrainConfig(**fields), out, progress=False,
+      callback=lambda m: m["iteration"] == at and os.kill(os.getpid(), signal.SIGKILL))
+"""
+
+
+def test_a_killed_run_resumes_to_every_results_column_of_the_uninterrupted_run(tmp_path):
+    """A run SIGKILLed after iteration 5 (its last checkpoint is iteration 4's) and resumed
+    writes the uninterrupted run's results in every column (config, revision, evaluations,
+    learner metrics, the machine) but the CPU and wall seconds each run was measured to take."""
+    fields = dict(algo="oappo", steps=160 * 7, checkpoint_every=2, **TINY)
+    full = train(TrainConfig(**fields), tmp_path / "full", progress=False)
+    killed = subprocess.run([sys.executable, "-c", KILLED, json.dumps(fields), str(tmp_path / "resumed"), "5"],
+                            cwd=Path(cli.__file__).parents[1])
+    assert killed.returncode == -signal.SIGKILL and load_checkpoint(tmp_path / "resumed")["iteration"] == 4
+    resumed = train(TrainConfig(**fields), tmp_path / "resumed", progress=False)
+    measured = ["cpu_s", "wall_s"]
+    assert list(full.columns) == list(resumed.columns) and set(measured) < set(full.columns)
+    for a, b in ((full, resumed), (pd.read_csv(tmp_path / "full" / "results.csv"),
+                                   pd.read_csv(tmp_path / "resumed" / "results.csv"))):
+        pd.testing.assert_frame_equal(a.drop(columns=measured), b.drop(columns=measured))
+    assert _same(_params(tmp_path, "full"), _params(tmp_path, "resumed"))
+
+
 def test_resuming_with_more_steps_gives_the_rows_of_the_longer_run(tmp_path):
     """5 iterations end off the evaluation grid (every 2); extended to 10 the run must not keep
     that row, and must equal a run of 10 from the start."""
@@ -141,7 +173,7 @@ def test_resuming_with_more_steps_gives_the_rows_of_the_longer_run(tmp_path):
 @pytest.mark.parametrize("damage, words", [
     (lambda ck: ck["config"].pop("kl_reduce"), "no config fields ['kl_reduce']"),
     (lambda ck: ck["learner"].pop("critic_opt"), "no entry 'critic_opt'"),
-    (lambda ck: delattr(ck["step"], "active"), "environment step has no fields ['active']"),
+    (lambda ck: ck["step"].pop("active"), "environment step has no fields ['active']"),
     (lambda ck: ck["learner"].pop("np_rng"), "no entry 'np_rng'"),
 ])
 def test_an_older_checkpoint_without_a_new_field_gives_a_clear_error(tmp_path, damage, words):
@@ -182,29 +214,34 @@ def test_a_checkpoint_in_the_layout_before_issue_35_resumes_bit_for_bit(tmp_path
     assert _same(_params(tmp_path, "now"), _params(tmp_path, "before"))
 
 
-def test_a_pickled_object_of_a_moved_module_loads_from_its_new_home(tmp_path, monkeypatch):
-    """SePS's buffer, pickled by a checkpoint before issue 35 as ``oapo_lite.seps.Buffer``, loads as
-    ``oapo_lite.neural.seps.Buffer``; an object of an oapo_lite module that no longer exists is
-    refused as written by an older oapo_lite, not as damaged."""
-    cfg = TrainConfig(algo="oappo", steps=160 * 2, **TINY)
-    train(cfg, tmp_path, progress=False)
-    ck = load_checkpoint(tmp_path)
-    for name in ("seps", "gone"):
-        old = types.ModuleType(f"oapo_lite.{name}")
-        old.Buffer = type("Buffer", (), {"__module__": f"oapo_lite.{name}"})
-        monkeypatch.setitem(sys.modules, f"oapo_lite.{name}", old)
-        ck[name] = old.Buffer()
-        ck[name].records = [name]
-    torch.save({k: v for k, v in ck.items() if k != "gone"}, tmp_path / "seps.pt")
-    torch.save(ck, tmp_path / "checkpoint.pt")
-    for name in ("seps", "gone"):
-        monkeypatch.delitem(sys.modules, f"oapo_lite.{name}")
-    (tmp_path / "old").mkdir()
-    (tmp_path / "seps.pt").rename(tmp_path / "old" / "checkpoint.pt")
-    buffer = load_checkpoint(tmp_path / "old")["seps"]
-    assert type(buffer) is seps.Buffer and buffer.records == ["seps"]
-    with pytest.raises(ValueError, match=r"written by an older oapo_lite \(No module named 'oapo_lite.gone'\); start afresh"):
-        load_checkpoint(tmp_path)
+def test_a_checkpoint_written_before_issue_54_resumes_bit_for_bit(tmp_path, monkeypatch):
+    """A checkpoint of the layout before issue 54 held two objects: the envs' last step as a
+    ``VecStep`` and SePS's pre-training buffer as a ``seps.Buffer`` (pickled before issue 35 as
+    ``oapo_lite.seps.Buffer``). Both are read as data, and the run resumed from it ends where
+    the run resumed from the current layout ends."""
+    cfg = TrainConfig(algo="seps", steps=160 * 4, seps_pretrain_steps=160 * 3, checkpoint_every=2, **TINY)
+    fakes.interrupt(cfg, tmp_path / "now", at=3)  # its checkpoint is iteration 2's, in the pre-training
+    moved = types.ModuleType("oapo_lite.seps")
+    moved.Buffer = type("Buffer", (), {"__module__": "oapo_lite.seps"})
+    monkeypatch.setitem(sys.modules, "oapo_lite.seps", moved)
+    for name, buffer_type in (("before_54", seps.Buffer), ("before_35", moved.Buffer)):
+        shutil.copytree(tmp_path / "now", tmp_path / name)
+        ck = load_checkpoint(tmp_path / name)
+        ck["step"] = VecStep(**ck["step"])
+        parts, ck["learner"]["buffer"] = ck["learner"]["buffer"], buffer_type()
+        ck["learner"]["buffer"].parts = parts
+        torch.save(ck, tmp_path / name / "checkpoint.pt")
+        objects = torch.serialization.get_unsafe_globals_in_checkpoint(tmp_path / name / "checkpoint.pt")
+        assert {"oapo_lite.envs.vec.VecStep", f"{buffer_type.__module__}.Buffer"} <= set(objects)
+    monkeypatch.delitem(sys.modules, "oapo_lite.seps")
+    for name in ("before_54", "before_35"):
+        read = load_checkpoint(tmp_path / name)
+        assert type(read["step"]) is dict and type(read["learner"]["buffer"]) is list
+    ends = [train(cfg, tmp_path / name, progress=False) for name in ("now", "before_54", "before_35")]
+    assert ends[0]["seps_groups"].iloc[-1] != ends[0]["seps_groups"].iloc[1]  # regrouped after the resume
+    for name, end in zip(("before_54", "before_35"), ends[1:]):
+        pd.testing.assert_frame_equal(learning(ends[0]), learning(end))
+        assert _same(_params(tmp_path, "now"), _params(tmp_path, name))
 
 
 def test_oappo_without_admissible_reuse_is_bitwise_happo(tmp_path):

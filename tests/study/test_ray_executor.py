@@ -131,6 +131,23 @@ def test_a_driver_killed_mid_grid_loses_nothing_and_a_rerun_completes_it(cluster
     assert after == {name: local_smoke[name] for name in after} and len(after) == total
 
 
+def test_a_private_cluster_listens_on_loopback_only_and_has_no_dashboard(cluster):
+    """Every socket the cluster's processes listen on (GCS, raylet, object manager, workers,
+    agents, the head's driver) is bound to 127.0.0.1, so no other machine can reach it, and
+    nothing serves the dashboard (Ray's port 8265)."""
+    import psutil  # Ray's own dependency
+
+    bound = []
+    for pid in processes_of("oapo-ray-"):
+        try:
+            sockets = psutil.Process(pid).net_connections("inet")
+        except psutil.NoSuchProcess:  # it ended meanwhile
+            continue
+        bound += [(c.laddr.ip.removeprefix("::ffff:"), c.laddr.port) for c in sockets if c.status == psutil.CONN_LISTEN]
+    assert ("127.0.0.1", int(cluster.rsplit(":", 1)[1])) in bound  # the GCS's: these are the cluster's sockets
+    assert {ip for ip, _ in bound} == {"127.0.0.1"} and 8265 not in {port for _, port in bound}
+
+
 @pytest.mark.parametrize("executor", ["local", "ray"])
 def test_a_run_that_raises_is_reported_and_the_others_complete(executor, request, tmp_path, capsys):
     address = request.getfixturevalue("cluster") if executor == "ray" else None

@@ -220,9 +220,12 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
     if address is not None:
         ray.init(address=address, **init_kwargs)
         return ray, True
+    # A private cluster listens on loopback only (Ray binds its servers to the node's address) and
+    # without a dashboard, so no other machine can reach it; ``init_kwargs`` may ask otherwise
+    private = {"include_dashboard": False, "_node_ip_address": "127.0.0.1", **init_kwargs}
     for attempt in range(1, attempts + 1):
         try:
-            ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", **init_kwargs)
+            ray.init(**private)
             return ray, True
         except Exception as err:
             # Ray 2.60's raylet gives its Python agent a fixed 15 s to start and aborts after;
