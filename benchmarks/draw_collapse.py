@@ -58,8 +58,8 @@ from oapo_lite.envs.registry import agent_types
 from oapo_lite.neural import ppo_family
 from oapo_lite.neural.ppo_family import learner_dists
 from oapo_lite.neural.train import train
-from oapo_lite.study.experiments import read_run
-from oapo_lite.study.figures import runs_of
+from oapo_lite.study.runs.experiments import read_run
+from oapo_lite.study.catalogue.figures import runs_of
 
 
 def figure_cfg(figure: str, label: str, seed: int):
