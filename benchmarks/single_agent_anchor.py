@@ -1,6 +1,6 @@
-"""The single-agent anchor for App. A (issue 32): stable-baselines3's PPO at its defaults, with
-VecNormalize, on the same robot (gymnasium's HalfCheetah-v5, the env under MaMuJoCo's
-HalfCheetah 2x3) for the same env steps. Nothing of it enters the package: stable-baselines3 is
+"""The single-agent anchor for the multi-agent MuJoCo runs: stable-baselines3's PPO at its
+defaults, with VecNormalize, on the same robot (gymnasium's HalfCheetah-v5, the env under
+MaMuJoCo's HalfCheetah 2x3; or ``--env Ant-v5``, under Ant 4x2) for the same env steps. Nothing of it enters the package: stable-baselines3 is
 not a dependency, so install it beside the environment for this script alone::
 
     .venv/bin/pip install --target /tmp/sb3 --no-deps stable-baselines3
@@ -8,7 +8,7 @@ not a dependency, so install it beside the environment for this script alone::
 
 Every ``--eval-every`` env steps the policy is evaluated on ``--episodes`` episodes, stochastic
 as the project's evaluations are, with the training run's observation statistics frozen. The
-rows (seed, step, mean return) go to ``figures/data/anchor_halfcheetah_sb3.csv`` with the
+rows (seed, step, mean return) go to ``figures/data/anchor_<robot>_sb3.csv`` with the
 settings, versions and git revision in a JSON beside it; a seed already there is not run
 again. It prints each seed's final return (the mean over the last fifth of its evaluation
 points) and their interquartile mean, the number App. A's HAPPO is held against.
@@ -30,19 +30,23 @@ from oapo_lite.neural.runstate import git_revision  # noqa: E402
 from oapo_lite.store import atomic_write, write_frame  # noqa: E402
 from oapo_lite.study.judge.statistics import bootstrap_interval, iqm  # noqa: E402
 
-OUT = ROOT / "figures" / "data" / "anchor_halfcheetah_sb3.csv"
-ENV = "HalfCheetah-v5"
+ROBOTS = ("HalfCheetah-v5", "Ant-v5")
 
 
-def run_seed(seed: int, steps: int, eval_every: int, episodes: int) -> pd.DataFrame:
+def out_path(env: str) -> Path:
+    """The anchor's rows for gymnasium env ``env``: figures/data/anchor_<robot>_sb3.csv."""
+    return ROOT / "figures" / "data" / f"anchor_{env.split('-')[0].lower()}_sb3.csv"
+
+
+def run_seed(env: str, seed: int, steps: int, eval_every: int, episodes: int) -> pd.DataFrame:
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import VecNormalize
 
-    train_env = VecNormalize(make_vec_env(ENV, n_envs=1, seed=seed))
-    eval_env = VecNormalize(make_vec_env(ENV, n_envs=1, seed=seed + 10_000), training=False, norm_reward=False)
+    train_env = VecNormalize(make_vec_env(env, n_envs=1, seed=seed))
+    eval_env = VecNormalize(make_vec_env(env, n_envs=1, seed=seed + 10_000), training=False, norm_reward=False)
     rows = []
 
     def evaluate(step: int) -> None:
@@ -65,6 +69,7 @@ def run_seed(seed: int, steps: int, eval_every: int, episodes: int) -> pd.DataFr
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--env", default=ROBOTS[0], choices=ROBOTS)
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--eval-every", type=int, default=40_000)
@@ -73,17 +78,18 @@ def main(argv=None) -> int:
     import stable_baselines3
     import torch
 
-    done = pd.read_csv(OUT) if OUT.exists() else pd.DataFrame(columns=["seed", "step", "eval_return"])
+    out = out_path(args.env)
+    done = pd.read_csv(out) if out.exists() else pd.DataFrame(columns=["seed", "step", "eval_return"])
     for seed in args.seeds:
         if seed in set(done["seed"]):
             continue
-        done = pd.concat([done, run_seed(seed, args.steps, args.eval_every, args.episodes)], ignore_index=True)
-        write_frame(done, OUT)
-        record = json.dumps({"env": ENV, "algorithm": "stable-baselines3 PPO, MlpPolicy, defaults, VecNormalize",
+        done = pd.concat([done, run_seed(args.env, seed, args.steps, args.eval_every, args.episodes)], ignore_index=True)
+        write_frame(done, out)
+        record = json.dumps({"env": args.env, "algorithm": "stable-baselines3 PPO, MlpPolicy, defaults, VecNormalize",
                              "steps": args.steps, "eval_every": args.eval_every, "episodes": args.episodes,
                              "stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__,
                              "git_rev": git_revision()}, indent=1)
-        atomic_write(lambda tmp: Path(tmp).write_text(record), OUT.with_suffix(".json"))
+        atomic_write(lambda tmp: Path(tmp).write_text(record), out.with_suffix(".json"))
     finals = {s: run["eval_return"].iloc[-max(1, round(0.2 * len(run))):].mean()
               for s, run in done.sort_values("step").groupby("seed")}
     print("final return per seed (mean of the last fifth of the evaluations):",

@@ -43,6 +43,10 @@ def test_two_curves_of_a_figure_never_share_a_colour_and_a_curve_keeps_its_own()
     assert shared == {palette.OAPPO}
     assert {k for k, c in palette.PALETTE.items() if c == palette.OAPPO} == {"oappo", "sigma = 0.1", "lambda = 0.7"}
     assert not set(palette.PALETTE.values()) & set(render.AGENT_COLOURS.values())
+    # no curve is red, blue or black, the mazes' agents' colours, which the rule tells apart
+    assert {name: palette.forbidden(c) for name, c in render.AGENT_COLOURS.items()} == \
+        {"red": "red", "black": "black", "blue": "blue"}
+    assert {name: c for name, c in palette.PALETTE.items() if palette.forbidden(c)} == {}
     with pytest.raises(ValueError, match="no colour for the curve 'a new curve'; add it to"):
         palette.color("a new curve")
 

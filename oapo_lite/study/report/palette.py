@@ -3,7 +3,9 @@
 A curve keeps its colour wherever it is drawn, and two curves never share one: algorithms,
 OAPPO's readings and settings, the reuse schemes of Fig. 5b and the values of Fig. 3c's sigma
 and Fig. 3d's lambda each have their own. The mazes' agents are named after their colours (red,
-black, blue), so no curve is red, black or blue. A label the table lacks is an error, not a
+black, blue), so no curve is red, black or blue (``forbidden`` says which hues those are). The
+reusing curves trained with Algorithm 1's sampled source are drawn dashed (``dashes``), so that
+a curve and its sampled twin never hide each other. A label the table lacks is an error, not a
 colour picked by matplotlib: a new curve gets a row here.
 """
 from __future__ import annotations
@@ -15,27 +17,27 @@ PALETTE = {
     "oappo": OAPPO, "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b", "hatrpo": "#e377c2",
     "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
     # OAPPO's readings of the networks and its gate statistics
-    "oappo one seat": "#98df8a", "oappo type": "#1b7f79",
+    "oappo one seat": "#98df8a", "oappo type": "#6a51a3",
     "oappo agent max": "#005a32", "oappo agent mean": "#41ab5d", "oappo agent q90": "#a1d99b",
-    "oappo type max": "#08519c", "oappo type mean": "#6baed6", "oappo type q90": "#9ecae1",
+    "oappo type max": "#3f007d", "oappo type mean": "#807dba", "oappo type q90": "#c6c3e0",
     # the selection ablation: gated reuse (Eq. 8's weights, and a sampled source), always-on reuse, and per type
     # within its type only
-    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#1f9e89", "oappo type own type": "#7fb8b3",
+    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#dd3497", "oappo type own type": "#f768a1",
     "oappo gated sampled": "#7b6888", "oappo always sampled": "#e7cb94",
     # the dose-response on 2s3z: the gate at sigma from tight (darker) to loose (lighter), between
     # no reuse (HAPPO) and always-on; its median sigma is the ablation's gated curve (``ALIASES``)
     "oappo sigma=0.035": "#00441b", "oappo sigma=0.34": "#78c679", "oappo sigma=0.81": "#addd8e",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
-    "oappo entropy x W[i,i]": "#5254a3",
+    "oappo entropy x W[i,i]": "#cedb9c",
     # Fig. 3c's sigma and Fig. 3d's lambda (the paper's values are OAPPO's)
-    "sigma = 0.01": "#fdae6b", "sigma = 0.1": OAPPO, "sigma = 1": "#e6550d", "sigma = 10": "#843c39",
+    "sigma = 0.01": "#fdae6b", "sigma = 0.1": OAPPO, "sigma = 1": "#e6550d", "sigma = 10": "#7a0177",
     "lambda = 0.2": "#756bb1", "lambda = 0.4": "#9e9ac8", "lambda = 0.7": OAPPO, "lambda = 1": "#c49c94",
     # Fig. 5b's reuse schemes
-    "NR": "#636363", "UR": "#ce6dbd", "RR": "#3182bd", "AR": "#fd8d3c",
+    "NR": "#636363", "UR": "#ce6dbd", "RR": "#6a3d9a", "AR": "#fd8d3c",
     # HAPPO's settings on HalfCheetah, and the one-agent control
     "happo clip 0.05": "#bd9e39", "happo 15 epochs": "#8c6d31", "happo 128x3": "#e7ba52", "happo feature norm": "#7b4173",
-    "happo 20 x 200": "#a55194", "happo HARL": "#393b79", "happo normalized": "#de9ed6", "ppo one agent": "#969696",
+    "happo 20 x 200": "#a55194", "happo HARL": "#b5cf6b", "happo normalized": "#de9ed6", "ppo one agent": "#969696",
     "sb3 ppo (one agent)": "#525252",
 }
 # what is not a curve: Fig. 1's reused and omitted peers (and the mazes' agents, whose colours
@@ -60,3 +62,26 @@ def color(label) -> str:
         if candidate in PALETTE:
             return PALETTE[candidate]
     raise ValueError(f"no colour for the curve {label!r}; add it to oapo_lite.study.report.palette.PALETTE")
+
+
+def forbidden(colour: str) -> str | None:
+    """Which of the agents' colours ``colour`` reads as (red, blue or black), or None: a bright red
+    (a hue within 15 degrees of red, saturation above 0.5 and value above 0.6: browns are not red),
+    a blue (a hue between 195 and 245 degrees, saturation above 0.35), or black (value below 0.2)."""
+    import colorsys
+
+    r, g, b = (int(colour[k:k + 2], 16) / 255 for k in (1, 3, 5))
+    hue, saturation, value = colorsys.rgb_to_hsv(r, g, b)
+    degrees = 360 * hue
+    if value < 0.2:
+        return "black"
+    if saturation > 0.5 and value > 0.6 and (degrees < 15 or degrees > 345):
+        return "red"
+    if saturation > 0.35 and 195 <= degrees <= 245:
+        return "blue"
+    return None
+
+
+def dashes(label) -> str:
+    """The line style of curve ``label``: dashed for a curve trained with a sampled source."""
+    return "--" if str(label).endswith("sampled") else "-"

@@ -51,10 +51,11 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
             raise ValueError(f"curve {label!r} has no value of {y!r} to draw (every evaluation is empty)")
         color = palette.color(label)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
-        line, = ax.plot(runs.index, median, lw=2.2, label=str((legend or {}).get(label, label)), color=color, zorder=2)
+        line, = ax.plot(runs.index, median, lw=2.2, label=str((legend or {}).get(label, label)), color=color, zorder=2,
+                        ls=palette.dashes(label))
         seeds_of[label] = (runs, line.get_color())
-    for runs, color in seeds_of.values():
-        ax.plot(runs.index, runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3)
+    for label, (runs, color) in seeds_of.items():
+        ax.plot(runs.index, runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3, ls=palette.dashes(label))
     ax.xaxis.set_major_formatter(STEPS)
     if y == "frac_opt":
         ax.axhline(1.0, color="grey", ls="--", lw=1)
@@ -106,8 +107,8 @@ def interval_lines(table: pd.DataFrame, x: pd.Series, labels, metric: str, ax=No
 
 def across_shares(df: pd.DataFrame, order=None, ax=None, title=None):
     """Beside a figure's curves: per curve, the median over seeds of ``across_share`` (M's weight
-    on the seats of other networks: the reuse Eq. 9's gate decided) against env steps. A curve
-    that never reuses across networks lies at 0."""
+    on the seats of other networks: the reuse Eq. 9's gate decided) against env steps, with a key
+    (a sampled curve dashed over its weights twin). A curve that never reuses across networks lies at 0."""
     ax = ax or plt.subplots(figsize=(6, 3))[1]
     df = df[df["across_share"].notna()] if "across_share" in df else df.iloc[:0]
     if df.empty:
@@ -116,10 +117,11 @@ def across_shares(df: pd.DataFrame, order=None, ax=None, title=None):
     for label in order:
         runs = df[df["label"] == label].pivot_table(index="step", columns="seed", values="across_share")
         ax.plot(runs.index, np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower"), lw=2, label=str(label),
-                color=palette.color(label))
+                color=palette.color(label), ls=palette.dashes(label))
     ax.xaxis.set_major_formatter(STEPS)
     ax.set(xlabel="environment steps", ylabel="weight on other\nnetworks' seats", ylim=(-0.02, None),
            title=title or "reuse across networks (median over seeds)")
+    ax.legend(frameon=False, fontsize=8)
     return ax
 
 
@@ -138,8 +140,9 @@ def gate_strips(kl: pd.DataFrame, owner: list[int], sigma: float, names, ax=None
         ks = np.stack(kl.loc[kl["step"] == step, "kl_matrix"].to_list())  # (seeds, n, n)
         open_share[:, c] = [(ks[:, i, j] <= sigma).mean() for i, j in pairs]
     width = steps[1] - steps[0] if len(steps) > 1 else 1.0
-    ax.imshow(open_share, aspect="auto", cmap="Greens", vmin=0, vmax=1, interpolation="nearest",
-              extent=(steps[0] - width / 2, steps[-1] + width / 2, len(pairs) - 0.5, -0.5))
+    image = ax.imshow(open_share, aspect="auto", cmap="Greens", vmin=0, vmax=1, interpolation="nearest",
+                      extent=(steps[0] - width / 2, steps[-1] + width / 2, len(pairs) - 0.5, -0.5))
+    ax.figure.colorbar(image, ax=ax, label=f"share of seeds with K <= {sigma:g}", fraction=0.05)
     ax.set_yticks(range(len(pairs)), [f"{names[i]} <- {names[j]}" for i, j in pairs], fontsize=7)
     ax.xaxis.set_major_formatter(STEPS)
     ax.grid(False)

@@ -85,7 +85,7 @@ def with_across_share(df: pd.DataFrame) -> pd.DataFrame:
 
 def readings_table(figure: str, budget: str, metric: Metric) -> pd.DataFrame:
     """``reuse_table`` of a readings figure's runs on disk at ``budget`` (empty where it has none)."""
-    runs = experiments.load_figure(figure, budget, skip_missing=True)
+    runs = experiments.read_figure(figure, budget, skip_missing=True)[0]
     return pd.DataFrame() if runs.empty else reuse_table(runs, metric)
 
 

@@ -123,6 +123,12 @@ FIGURES = (
            common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS)},
            metric=ANT_RETURN, claims=tuple(dose_claims(tuple(ANT_DOSE_SIGMA.values()), "Ant 4x2", ANT_RETURN)),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+    # the normalisation rule's choice held out: both learners on the ablation's seeds 10-19 (the
+    # normalised runs are the ablation's HAPPO runs)
+    Figure("fig_normalize_out_of_sample", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
+           common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("cpu",),
+           budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS)}, metric=RETURN, section="App. A",
+           notebook="21_mamujoco_appA"),
     Figure("fig_readings_mamujoco", reading_curves(HALFCHEETAH), runs_at=("cpu",),
            budgets={"cpu": At(seeds=(0, 1, 2), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
