@@ -12,6 +12,7 @@ venv: .venv/installed
 	python3 -m venv .venv
 	.venv/bin/pip install --quiet --upgrade pip
 	.venv/bin/pip install --quiet -r environment.txt
+	.venv/bin/pip install --quiet --no-deps rliable==1.2.0
 	# jsonschema's optional rfc3987-syntax (pulled in by jupyter-events) builds a parser on import,
 	# 2 s of CPU in every process that imports ray; on a busy machine Ray's agents then missed the
 	# raylet's fixed 15 s start-up window. Nothing here validates IRIs.
