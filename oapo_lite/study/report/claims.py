@@ -48,7 +48,7 @@ def table(figures, budgets=SEED_BUDGETS) -> pd.DataFrame:
             name = f"{budget} ({len(grid.get_budget(budget).seeds)} seeds)"
             rows += [{"budget": name, "claim": v.claim.text, "estimate [95% CI]": words.lead_estimate(v),
                       "verdict": v.status.value, "why": words.reason(v)}
-                     for f in figures for v in verdicts.judge(f, experiments.load_figure(get_figure(f).id, budget))]
+                     for f in figures for v in verdicts.judge(f, experiments.read_figure(get_figure(f).id, budget)[0])]
     if not rows:
         raise FileNotFoundError(f"no budget in {budgets} has every run of {figures} on disk")
     return pd.DataFrame(rows)

@@ -89,7 +89,8 @@ def reuse(r: Reuse) -> str:
     last = ("no seed ever gave another network's seats weight" if np.isnan(r.last_open)
             else f"the gate last opened across networks at {r.last_open:,.0f} steps")
     return (f"{last}; {r.curve} reused across networks at {r.while_learning:.1%} of its evaluated iterations while "
-            f"it learned (up to {LEARNED:.0%} of its gain; {r.overall:.1%} of all of them), mean over {r.seeds} seeds")
+            f"it learned (up to {LEARNED:.0%} of its gain; {r.overall:.1%} of all of them), mean over {r.seeds} "
+            f"seed{'s' * (r.seeds != 1)}")
 
 
 def mechanism(v: Verdict) -> str:
