@@ -108,8 +108,9 @@ def glance_table(judged: list[verdicts.Judged] | None = None) -> pd.DataFrame:
     for (figure, env), (j, vs) in unrun.items():
         fig = j.figure
         env = env or fig.common.get("env", fig.id)
-        texts = [v.claim.text.split(": ", 1)[-1] for v in vs]
-        rows.append({"section": fig.section, "claim": f"{env.removeprefix(fig.claims_per_env or '')}: {len(texts)} "
+        short = env.removeprefix(fig.claims_per_env or "")
+        texts = [v.claim.text.removeprefix(f"{short}: ") for v in vs]  # the env is said once, first
+        rows.append({"section": fig.section, "claim": f"{short}: {len(texts)} "
                                                      f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
                      "notebook": fig.notebook, "verdict": Status.NOT_RUN.value,
                      "budget": budget_share(fig, env, j.budget, 0), "why": words.gap(vs[0].gap, vs[0]), "seeds": "-",

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from oapo_lite.study.catalogue.figures import get_figure
+from oapo_lite.study.catalogue.figures.layouts import CURVES
 from oapo_lite.study.judge import verdicts
 from oapo_lite.study.judge.evidence import Evidence
 from oapo_lite.study.judge.records import DECIDED, Status, Verdict
@@ -69,13 +70,19 @@ def ablation_table(judged: list[verdicts.Judged]) -> pd.DataFrame:
     rows = []
     for figure in ABLATION + DOSE:
         for v in _figure(judged, figure):
-            env = v.claim.text.split(":")[0]
             e = v.estimates[0] if v.estimates else None
-            rows.append({"env": env, "claim": v.claim.text.split(": ", 1)[1], "verdict": v.status.value,
+            rows.append({"env": env_name(v), "claim": v.claim.text, "verdict": v.status.value,
                          "estimate": "-" if e is None else f"{e.interval.point:.2f} [{e.interval.low:.2f}, "
                                                             f"{e.interval.high:.2f}]",
                          "seeds": words.seeds(v) if v.robustness else "-"})
     return pd.DataFrame(rows)
+
+
+def env_name(v: Verdict) -> str:
+    """The map or robot a verdict is about: its claim's env, else its figure's, without the engine."""
+    env = v.claim.env or get_figure(v.figure).common.get("env") or next(
+        kw["env"] for _, kw in get_figure(v.figure).curves if "env" in kw)
+    return env.partition(":")[2] or env
 
 
 def draw_pairs() -> pd.DataFrame:
@@ -113,7 +120,7 @@ def maze_sentence(judged) -> str:
     m = _maze(judged)
     faster, below = m["faster"], m["below"]
     b = lambda label: f"{int(below.loc[label, 'below'])} of {int(below.loc[label, 'runs'])}"
-    lean = ", ".join(f"lambda = {c.split('=')[1]}: {b(c)}" for c in LEAN if c in below.index)
+    lean = ", ".join(f"lambda = {CURVES[c]['reuse_lambda']:g}: {b(c)}" for c in LEAN if c in below.index)
     balance = m["balance"]
     return (f"On the mazes (Section 6.1), the paper's claim that OAPPO converges faster than HAPPO is "
             f"{faster.lead.status} on {len(faster.lead.robustness.seeds)} seeds ({words.lead_estimate(faster.lead)}), "
@@ -138,7 +145,7 @@ def _share(figure: str) -> str:
 
 def smax_sentence(judged) -> str:
     s = _smax(judged)
-    ends = {v.claim.text.split(":")[0]: v for v in _figure(judged, "fig_selection_smax") if v.claim.test == "selects"}
+    ends = {env_name(v): v for v in _figure(judged, "fig_selection_smax") if v.claim.test == "selects"}
     chosen = [e for e, v in ends.items() if v.held]
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
     reuse = [v for v in _figure(judged, "fig_selection_smax")
@@ -148,7 +155,7 @@ def smax_sentence(judged) -> str:
             f"decided it ({len(s['contradicted'])} contradicted, {len(s['heads']) - len(s['decided'])} undecided or not "
             f"run), because plain parameter sharing is strong there; in the seed-paired ablation reuse across "
             f"networks ended above no reuse on {len(reuse)} map{'s' * (len(reuse) != 1)} ("
-            + ", ".join(v.claim.text.split(':')[0] for v in reuse) + "), but a KL gate ended above both no reuse and "
+            + ", ".join(env_name(v) for v in reuse) + "), but a KL gate ended above both no reuse and "
             f"always-on reuse on {len(chosen)} of {len(ends)} maps"
             + (f", and 6h_vs_8z cannot tell them apart: every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}."
                if top else "."))
@@ -173,17 +180,22 @@ def mujoco_sentence(judged) -> str:
             f"({gated.interval.point:+.0f} on {gated.higher_on} of {gated.seeds} seeds) only by turning reuse off.")
 
 
+# what a figure's envs are, in the paper's words (a sentence names them with these)
+KINDS = {"fig4_smax": "heterogeneous SMAC map (here SMAX's stand-in for MMM2)", "fig6b": "football academy scenarios"}
+
+
 def unrun_sentence(judged) -> str:
-    table = claims.glance_table(judged)
-    never = table[table["verdict"] == Status.NOT_RUN.value]
-    if never.empty:
+    never = [j for j in judged if j.lead.status == Status.NOT_RUN]
+    if not never:
         return "The table below says claim by claim what held."
-    envs = ", ".join(f"{row['claim'].split(':')[0]} ({row['notebook'][:2]})" for _, row in never.iterrows())
-    plans = {j.figure.id for j in judged if j.lead.status == Status.NOT_RUN}
-    hours = sum(costs.plan("paper", figures=(f,), from_nothing=True)[0][0].cpu_hours for f in plans)
-    return (f"Never run: {envs}, the paper's second heterogeneous SMAC map (a stand-in) and football academies, whose "
-            f"`paper` budgets need about {hours:,.0f} CPU hours (priced runs only): a cluster's job; the table below "
-            "says claim by claim what held.")
+    by = {}
+    for j in never:
+        by.setdefault(j.figure.id, []).append(env_name(j.lead))
+    parts = [f"Section {fig.section}'s {KINDS.get(fig.id, 'envs')} {', '.join(dict.fromkeys(envs))} (notebook "
+             f"{fig.notebook[:2]})" for fig, envs in ((get_figure(f), envs) for f, envs in by.items())]
+    hours = sum(costs.plan("paper", figures=(f,), from_nothing=True)[0][0].cpu_hours for f in by)
+    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need about {hours:,.0f} CPU hours (priced runs "
+            "only), a cluster's job; the table below says claim by claim what held.")
 
 
 def opening(judged: list[verdicts.Judged] | None = None) -> str:
@@ -207,7 +219,7 @@ def draw_sentence() -> str:
     always = pairs[pairs["weights"] == "oappo always"]
     if always.empty:
         return ""
-    parts = [f"{row['env'].split(':')[1]} {row['sampled minus weights']:+.3g} [{row['low']:.3g}, {row['high']:.3g}] "
+    parts = [f"{row['env'].partition(':')[2]} {row['sampled minus weights']:+.3g} [{row['low']:.3g}, {row['high']:.3g}] "
              f"(sampled higher on {row['sampled higher']} of {row['pairs']} seeds)" for _, row in always.iterrows()]
     return ("With the gate always open, Algorithm 1's draw (one source per learner and iteration) against Eq. 8's "
             "weights, final value sampled minus weights, IQM of paired seeds: " + "; ".join(parts) + ".")
@@ -228,7 +240,7 @@ def cost_sentence() -> str:
             said = [f"{label} {r['cpu_s']:.0f}" + ("" if r["side_by_side"] else " (measured at other revisions)")
                     for label, r in rows if not np.isnan(r["cpu_s"])]
             paid = [label for label, r in rows if r["side_by_side"] and r["cpu_s"] < part.loc["happo", "cpu_s"]]
-            parts.append(f"{env.split(':')[1]} (to {level.reach.format(level.threshold)}): HAPPO "
+            parts.append(f"{env.partition(':')[2]} (to {level.reach.format(level.threshold)}): HAPPO "
                          f"{part.loc['happo', 'cpu_s']:.0f}, " + ", ".join(said) + " CPU seconds; reuse "
                          + (f"paid for its compute with {', '.join(paid)}" if paid else "did not pay for its compute"))
     return ("What reuse costs, from the runs' own records: " + "; ".join(parts) + ".") if parts else ""
