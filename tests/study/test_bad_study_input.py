@@ -1,0 +1,264 @@
+"""Bad input to the study and damaged run caches: a run file is checked when read, a library call
+with wrong input names it, a notebook parameter is checked in the first cell."""
+import dataclasses
+import re
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import fakes
+from bad_input import SMALL
+from oapo_lite import store
+from oapo_lite.neural.config import TrainConfig
+from oapo_lite.neural.results import learning
+from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue.metrics import FRAC_OPT, WIN_RATE
+from oapo_lite.study.catalogue.tests import Claim
+from oapo_lite.study.judge import evidence, statistics, verdicts
+from oapo_lite.study.report import plotting, words
+from oapo_lite.study.runs import experiments
+from oapo_lite.study.studies import tables
+
+
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    (cfg,) = [c for _, c in figures.figure_runs("fig1", "smoke")]
+    assert experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False).done == 1
+    return cfg, experiments.run_path(cfg, "smoke")
+
+
+@pytest.mark.parametrize("damage, words", [
+    (lambda df, p: p.write_bytes(b"\x89PNG\x00\xff" * 40), "damaged"),
+    (lambda df, p: p.write_bytes(b""), "damaged"),
+    (lambda df, p: df.iloc[:1].to_csv(p, index=False), "it has 1 rows where the config has 3 evaluations"),
+    (lambda df, p: df.assign(step=df["step"].where(df.index != 1)).to_csv(p, index=False), "evaluation steps"),
+    (lambda df, p: df.drop(columns="eval_return").to_csv(p, index=False), r"lacks the columns \['eval_return'\]"),
+    (lambda df, p: df.assign(seed=7).to_csv(p, index=False), "another run's rows"),
+])
+def test_the_run_cache_is_checked_when_read_and_a_damaged_run_is_trained_again(tmp_path, monkeypatch, capsys,
+                                                                              damage, words):
+    cfg, path = _cache(tmp_path, monkeypatch)
+    good = learning(pd.read_csv(path))
+    damage(pd.read_csv(path), path)
+    with pytest.raises(store.DamagedFile, match=f"run file {re.escape(str(path))} .*{words}"):
+        experiments.load_figure("fig1", "smoke")
+    assert experiments.missing_runs("fig1", "smoke")[0].cfg == cfg
+    assert f"warning: run file {path}" in capsys.readouterr().err
+    count = experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False)
+    assert (count.done, count.cached) == (1, 0)
+    pd.testing.assert_frame_equal(learning(pd.read_csv(path)), good)
+    assert experiments.load_figure("fig1", "smoke")["step"].is_monotonic_increasing
+
+
+def test_the_api_names_bad_arguments(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    for label, cfg in figures.figure_runs("fig1", "smoke"):
+        fakes.write_run(cfg, "smoke", lambda s: s / 400)
+    assert experiments.run_all("smoke", figures="fig1", workers=1, progress=False).cached == 1  # one name is a figure
+    for workers in (0, -3, "2", True):
+        with pytest.raises(ValueError, match=f"workers = {re.escape(repr(workers))} is invalid"):
+            experiments.run_all("smoke", figures=["fig1"], workers=workers)
+    with pytest.raises(TypeError, match="must be a pandas DataFrame"):
+        evidence.summary(None)
+    with pytest.raises(ValueError, match=r"square \(n, n\) matrix"):
+        plotting.reuse_heatmap(np.array([]))
+    assert plotting.final_bars(pd.DataFrame()).texts[0].get_text() == "no runs on disk"
+
+
+def test_every_notebook_names_its_kernel():
+    """papermill without -k reads the kernel from the notebook."""
+    import nbformat
+
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
+
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        assert nbformat.read(path, as_version=4).metadata.get("kernelspec", {}).get("name") == "python3", path.name
+
+
+def test_a_bad_budget_value_stops_the_first_cell(tmp_path):
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+
+    with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget 'nope'"):
+        run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": "nope"})
+
+
+def test_the_tables_take_no_rows_and_name_what_they_lack():
+    from oapo_lite.study.report import claims
+
+    none = pd.DataFrame(columns=claims.GLANCE_COLUMNS + ["n_claims", "one_seed"])
+    assert claims.summary(none).empty and claims.summary_lines(none) == []
+    assert claims.readme_markdown(none).endswith("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for table in (claims.summary, claims.summary_lines, claims.readme_markdown):
+        with pytest.raises(ValueError, match=r"summary counts glance_table\(\)'s rows"):
+            table(pd.DataFrame())
+    assert tables.reuse_table(pd.DataFrame(), WIN_RATE).empty
+    with pytest.raises(ValueError, match=r"no runs labelled \['a', 'b'\] to pair; the runs' labels are \[\]"):
+        evidence.Evidence(pd.DataFrame()).pairs("a", "b")
+    one = pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": [1.0]})
+    with pytest.raises(ValueError, match=r"no runs of the curves \['nonexistent'\] to draw; the data's curves are "
+                                         r"\['a'\]"):
+        plotting.learning_curves(one, order=["nonexistent"])
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: evidence.per_run(pd.DataFrame({"label": ["a"], "seed": [0], "step": [0], "frac_opt": ["x"]})),
+     "'frac_opt' column holds text"),
+    (lambda: evidence.per_run(pd.DataFrame(), threshold=float("nan")), "threshold = nan is invalid"),
+    (lambda: evidence.per_run(pd.DataFrame(), dataclasses.replace(FRAC_OPT, tail=5)), "tail = 5 is invalid; allowed: a share"),
+    (lambda: evidence.per_run(pd.DataFrame(), "frac_opt"), "metric must be a catalogue.metrics.Metric"),
+    (lambda: evidence.Evidence(_two_curves().drop(columns="reuse_matrix")).pairs("a", "a"), "a and b are both 'a'"),
+    (lambda: evidence.Evidence(_two_curves(b_seed=7).drop(columns="reuse_matrix")).pairs("a", "b"),
+     "no seed has runs of both"),
+    (lambda: tables.reuse_table(_two_curves().drop(columns="env"), FRAC_OPT), "lack the columns ['env', 'owner']"),
+    (lambda: evidence.per_run(_two_curves()), "the runs hold reuse matrices but no owner column"),
+    (lambda: claims_module().summary(None), "summary counts glance_table()'s rows"),
+    (lambda: claims_module().summary(pd.DataFrame({"section": ["6.1"], "claim": ["c"], "verdict": ["held?"],
+                                                   "n_claims": [1], "one_seed": [False]})),
+     "verdicts ['held?'] that are no status"),
+    (lambda: claims_module().markdown([1]), "markdown takes a DataFrame, got list"),
+    (lambda: plotting.learning_curves([1]), "must be a pandas DataFrame"),
+    (lambda: plotting.learning_curves(_two_curves().drop(columns="seed")), "lack the columns ['seed']"),
+    (lambda: plotting.learning_curves(pd.concat([_two_curves()] * 2)), "has two rows for seed 0 at step 0"),
+    (lambda: plotting.learning_curves(_two_curves().assign(frac_opt=np.nan)), "has no value of 'frac_opt' to draw"),
+])
+def test_a_library_call_with_wrong_input_names_it(call, words):
+    with pytest.raises((ValueError, TypeError), match=re.escape(words)):
+        call()
+
+
+def claims_module():
+    from oapo_lite.study.report import claims
+
+    return claims
+
+
+def _two_curves(b_seed: int = 0) -> pd.DataFrame:
+    eye = np.eye(2)
+    return pd.DataFrame({"label": ["a", "a", "b", "b"], "seed": [0, 0, b_seed, b_seed], "step": [0, 1, 0, 1],
+                         "frac_opt": [0.1, 0.9, 0.2, 0.5], "env": "black_red", "reuse_matrix": [eye] * 4})
+
+
+def test_markdown_keeps_a_cell_with_a_line_break_on_its_row():
+    from oapo_lite.study.report import claims
+
+    text = claims.markdown(pd.DataFrame({"a": ["one\ntwo", "x|y"]}))
+    assert text.splitlines()[2:] == ["| one two |", "| x\\|y |"]
+
+
+def test_a_misspelled_notebook_parameter_stops_the_first_cell_naming_it(tmp_path):
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+
+    with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown notebook parameter\(s\) \['budgte'\]; this "
+                                             r"notebook takes \['budget'\]"):
+        run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budgte": "smoke"})
+
+
+def test_every_notebook_checks_its_parameters_right_after_them():
+    import nbformat
+
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
+
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        cells = nbformat.read(path, as_version=4).cells
+        for i, cell in enumerate(cells):
+            if "parameters" in cell.metadata.get("tags", []):
+                names = re.findall(r"^(\w+)\s*=", cell.source, re.M)
+                call = f"check_parameters({', '.join(map(repr, names))})"
+                assert call in cells[i + 1].source.split("\n", 3)[2], (path.name, call)
+
+
+def test_the_run_cache_refuses_another_configs_rows_and_text_in_a_number_column(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    ten, one = (TrainConfig(algo="oappo", sigma=s, **SMALL) for s in (10.0, 1.0))
+    fakes.write_run(ten, "smoke", lambda s: s / 400)
+    experiments.read_run(ten, "smoke")  # whole and its own
+    shutil.copy(experiments.run_path(ten, "smoke"), experiments.run_path(one, "smoke"))
+    with pytest.raises(store.DamagedFile, match=r"another run's rows: its sigma column does not say 1.0"):
+        experiments.read_run(one, "smoke")
+    path = experiments.run_path(ten, "smoke")
+    pd.read_csv(path).assign(eval_return="lots").to_csv(path, index=False)
+    with pytest.raises(store.DamagedFile, match=r"its eval_return column at row 1 \(step 0\) holds 'lots'; allowed: "
+                                                r"a number \(finite\); empty only where no evaluation episode ended"):
+        experiments.read_run(ten, "smoke")
+
+
+M_JSON = "[[0.7, 0.3], [0.3, 0.7]]"
+
+
+@pytest.mark.parametrize("column, damage, words", [
+    ("frac_opt", lambda v: v.where(v.index < len(v) - 4, np.nan), r"frac_opt column at row 8 \(step 1400\) is empty; allowed: a "
+                                                                   r"number \(a maze's evaluation episodes always end\)"),
+    ("frac_opt", lambda v: v.where(v.index != 3, np.inf), r"frac_opt column at row 4 \(step 600\) holds inf; "
+                                                          r"allowed: a number <= 1.00001"),
+    ("frac_opt", lambda v: v * 10, r"frac_opt column at row 3 \(step 400\) holds 2.0; allowed: a number <= 1"),
+    ("frac_opt", lambda v: v * 0.5, r"frac_opt column at row 2 .* allowed: eval_return / the maze's optimum = 0.1"),
+    ("eval_success", lambda v: v - 1, r"eval_success column at row 1 \(step 0\) holds -1.0; allowed: a number in "
+                                      r"\[0, 1\]"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[1]"), r"reuse_matrix column at row 3 .* allowed: a square matrix"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, '"text"'), r"reuse_matrix column at row 3 \(step 400\) holds "
+                                                               r"'text'; allowed: a square matrix"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[0.7, 0.4], [0.3, 0.7]]"), r"rows summing to 1"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]"),
+     r"the same number of seats in every matrix \(\[2, 3\] here\)"),
+    ("reuse_matrix", lambda v: v.where(v.index != 2, "[[0.7, 0.3]"), r"its reuse_matrix column at row 3 holds "
+                                                                    r"'\[\[0.7, 0.3\]', which is not JSON"),
+    ("iteration", lambda v: v + 1, r"iteration column at row 1 \(step 0\) holds 1; allowed: step / .* = 0"),
+    ("peer_share", lambda v: v.where(v.index == 0, 1.5), r"peer_share column at row 2 .* holds 1.5; allowed: a "
+                                                        r"number in \[0, 1.00001\]"),
+    ("value_loss", lambda v: v.where(v.index != 3, np.nan), r"value_loss column at row 4 .* empty only at the "
+                                                           r"evaluation before the first iteration"),
+    ("extra", lambda v: 1.0, r"columns no results row holds: \['extra'\]"),
+])
+def test_a_run_file_with_a_value_out_of_its_columns_range_is_refused_naming_file_column_and_row(
+        tmp_path, monkeypatch, column, damage, words):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    cfg = TrainConfig(algo="oappo", **dict(SMALL, steps=2000))
+    n = len(cfg.eval_steps)
+    fakes.write_run(cfg, "smoke", lambda s: s / 2000, grid=1, value_loss=[np.nan] + [0.5] * (n - 1),
+                    peer_share=[np.nan] + [0.3] * (n - 1), reuse_matrix=[np.nan] + [M_JSON] * (n - 1))
+    experiments.read_run(cfg, "smoke")  # whole
+    path = experiments.run_path(cfg, "smoke")
+    df = pd.read_csv(path)
+    df[column] = damage(df[column]) if column in df else damage(None)
+    df.to_csv(path, index=False)
+    with pytest.raises(store.DamagedFile, match=f"run file {re.escape(str(path))} .*{words}"):
+        experiments.read_run(cfg, "smoke")
+    assert not experiments.on_disk(cfg, "smoke")  # so reproduce trains it again
+
+
+def test_an_engine_evaluation_may_be_empty_and_every_verdict_says_so():
+    runs = pd.DataFrame({"label": ["a"] * 8 + ["b"] * 8, "seed": ([0] * 4 + [1] * 4) * 2,
+                         "step": list(range(4)) * 4,
+                         "eval_success": [0, .5, .9, np.nan, 0, .5, .9, 1, 0, .1, .1, .1, 0, .1, .2, .1]})
+    rows = evidence.per_run(runs, dataclasses.replace(WIN_RATE, tail=0.5))
+    # the window: 3 evaluations at least, of those that hold a value
+    assert rows["gaps"].tolist() == [1, 0, 0, 0] and rows["final"].iloc[0] == pytest.approx(np.mean([0, 0.5, 0.9]))
+    v = verdicts.check(evidence.Evidence(runs, WIN_RATE), Claim("a ends above b", "higher", ("a", "b")))
+    assert v.empty == (("a", 1),)
+    assert words.reason(v).endswith("1 of a's evaluations hold no value (no evaluation episode ended) and are left out")
+    with pytest.raises(ValueError, match=r"curve 'a' has two rows for seed 0 at step 1"):
+        evidence.per_run(pd.concat([runs, runs.iloc[[1]]]), WIN_RATE)
+
+
+def test_reading_results_never_writes(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    for label, cfg in figures.figure_runs("fig1", "smoke"):
+        fakes.write_run(cfg, "smoke", lambda s: s / 400)
+    written = []
+    monkeypatch.setattr(store, "atomic_write", lambda *a: written.append(a))
+    assert len(experiments.load_figure("fig1", "smoke")) and written == []
+    monkeypatch.undo()
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    assert experiments.export_figure("fig1", "smoke") == experiments.data_dir("smoke") / "fig1.csv"
+    assert experiments.export_figure("fig1", "smoke") is None  # unchanged: left alone
+
+
+def test_the_statistics_take_a_frame_with_no_run(tmp_path):
+    empty = pd.DataFrame()
+    assert evidence.per_run(empty).empty and list(evidence.per_run(empty).columns) == evidence.PER_RUN_COLUMNS
+    assert evidence.summary(empty).empty and evidence.intervals(empty).empty and tables.reuse_summary(empty).empty
+    assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
+    assert np.isnan(statistics.probability_of_improvement([np.nan, np.nan], [1, 2]))
+    assert statistics.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
