@@ -1,9 +1,14 @@
 """What the tests of bad input share: a quick training command line, a small config, the
-command line's one-line error, and the processes a command leaves behind."""
+command line's one-line error, the processes a command leaves behind, and a FIFO that cannot hang
+a test, and a Unix socket."""
+import contextlib
 import os
 import signal
+import socket
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -108,3 +113,39 @@ def sleeping_driver(out: Path) -> None:
     jobs = [(k, (60.0,)) for k in range(5)]
     for _ in in_processes(sleep_with_a_child, jobs, workers=2):
         out.write_text("a job finished")
+
+
+@contextlib.contextmanager
+def fifo(path: Path, after: float = 20.0):
+    """A FIFO at ``path`` for the block; a reader that opens it anyway is let go after ``after``
+    seconds (a thread opens the other end and closes it: the reader sees an empty file), so that
+    a regression fails its test instead of hanging the suite."""
+    os.mkfifo(path)
+    done = threading.Event()
+
+    def release():
+        done.wait(after)
+        while not done.is_set():
+            try:
+                os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))  # ENXIO: no reader has it open
+            except OSError:
+                pass
+            done.wait(0.5)
+
+    thread = threading.Thread(target=release, daemon=True)
+    thread.start()
+    try:
+        yield path
+    finally:
+        done.set()
+        thread.join()
+
+
+@contextlib.contextmanager
+def unix_socket(path: Path):
+    """A Unix socket at ``path`` for the block: bound at a short path (a socket's address is at
+    most 108 bytes) and moved there."""
+    with tempfile.TemporaryDirectory(dir="/tmp") as short, socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(f"{short}/s")
+        os.replace(f"{short}/s", path)
+        yield path

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bad_input import QUICK, SMALL, STOP_LIMIT_S, children, cli_error, kill, not_zombie, outliving, quick_but
+from bad_input import QUICK, SMALL, STOP_LIMIT_S, children, cli_error, fifo, kill, not_zombie, outliving, quick_but
 from oapo_lite import __main__ as cli, store
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.train import train
@@ -143,7 +143,7 @@ def test_a_bug_says_how_to_see_its_traceback_and_debug_shows_it(tmp_path, capsys
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--workers", "0"], ["--workers", "'0' is invalid", "integer >= 1"]),
+    (["--workers", "0"], ["--workers", "'0' is invalid", "an integer in [1, 1024]"]),
     (["--workers", "-3"], ["'-3' is invalid"]),
     (["--budget", "huge"], ["unknown budget 'huge'", "smoke"]),
 ])
@@ -360,11 +360,11 @@ def test_a_lock_that_is_a_folder_is_one_line_in_train_and_in_reproduce(tmp_path,
     lock.mkdir(parents=True)
     assert reproduce.main(["--budget", "smoke", "--figures", "fig1", "--skip-notebooks", "--check"]) == 1
     err = capsys.readouterr().err
-    assert f"error: the lock file {lock} is a folder; delete it" in err and "Traceback" not in err
+    assert f"error: the lock file {lock} is a folder, not a file; delete it" in err and "Traceback" not in err
     out = tmp_path / "runs"
     quick = TrainConfig(n_envs=8, rollout_len=25, steps=400, eval_episodes=4)  # QUICK's run
     (out / quick.run_id() / ".lock").mkdir(parents=True)
-    assert "is a folder; delete it" in cli_error(capsys, "train", *QUICK, "--out", str(out))
+    assert "is a folder, not a file; delete it" in cli_error(capsys, "train", *QUICK, "--out", str(out))
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -386,3 +386,195 @@ def test_an_interrupt_while_the_command_still_imports_is_one_line_and_130(tmp_pa
         assert driver.returncode == 130 and "Traceback" not in err and "run the same command again" in err, \
             (delay, driver.returncode, err)
     assert checked, "every signal came before the package ran or after the run ended: nothing was tested"
+
+
+# ---------------------------------------------------------------- issue 53: a run file that is no file
+
+
+@pytest.mark.parametrize("plan", [True, False], ids=["--plan", "train"])
+def test_reproduce_names_a_run_file_that_is_no_file_and_ends(tmp_path, capsys, monkeypatch, plan):
+    """Both hung on a FIFO in the run cache, and a Ctrl-C then read it again."""
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    (cfg,) = [c for _, c in figures.figure_runs("fig1", "smoke")]
+    path = experiments.run_path(cfg, "smoke")
+    path.parent.mkdir(parents=True)
+    with fifo(path):
+        err = cli_error(capsys, "reproduce", "--budget", "smoke", "--figures", "fig1", "--skip-notebooks",
+                        *(["--plan"] if plan else ["--check"]))
+    assert f"run file {path} is a FIFO (named pipe), not a file; delete or move it" in err
+
+
+# ---------------------------------------------------------------- issue 53: a name that names nothing
+
+
+@pytest.mark.parametrize("budget, figure, runs_at", [
+    ("student", "fig4_smax", "['smoke', 'paper', 'cpu']"),
+    ("student", "fig5b", "['smoke', 'paper', 'paper20', 'cpu']"),
+    ("smoke", "fig_dose_smax", "['cpu']"),
+])
+@pytest.mark.parametrize("plan", [True, False], ids=["--plan", "train"])
+def test_reproduce_refuses_a_named_figure_without_runs_at_the_budget(tmp_path, capsys, monkeypatch, budget, figure,
+                                                                    runs_at, plan):
+    """It said "0 trained" and "0 of 0 runs" without a word that the figure has none there."""
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    err = cli_error(capsys, "reproduce", "--budget", budget, "--figures", figure, "--skip-notebooks",
+                    *(["--plan"] if plan else []))
+    assert f"figure '{figure}' has no runs at budget '{budget}'; it has runs at {runs_at}" in err
+
+
+# ---------------------------------------------------------------- issue 53: a connection with a deadline
+
+
+@pytest.mark.parametrize("address, words", [
+    ("127.0.0.1:1", "no Ray cluster at '127.0.0.1:1': connection refused (a connection waits at most 10 s)"),
+    ("no-such-host.invalid:6379", "Ray address 'no-such-host.invalid:6379': no such host 'no-such-host.invalid'"),
+    ("ray://127.0.0.1:1", "no Ray cluster at 'ray://127.0.0.1:1': connection refused"),
+    ("localhost:1", "no Ray cluster at 'localhost:1'"),
+])
+def test_a_plan_on_a_ray_cluster_that_is_not_there_ends_within_its_deadline(capsys, address, words):
+    """The plan only counts the cluster's CPUs, yet waited on 127.0.0.1:1 past 580 s."""
+    start = time.monotonic()
+    err = cli_error(capsys, "reproduce", "--plan", "--executor", "ray", "--address", address)
+    assert words in err and time.monotonic() - start < 60
+
+
+def test_a_head_that_never_answers_is_named_with_the_wait(monkeypatch):
+    from oapo_lite.study.runs import executors
+
+    def silent(address, timeout):
+        raise TimeoutError("timed out")
+
+    monkeypatch.setattr(executors.socket, "create_connection", silent)
+    with pytest.raises(ConnectionError, match=r"no Ray cluster answered at '10.0.0.1:6379' within 2 s; start one"):
+        executors.reach("10.0.0.1:6379", deadline=2)
+
+
+# ---------------------------------------------------------------- issue 53: a path the system refuses
+
+
+@pytest.mark.parametrize("command, where, value, words", [
+    ("train", "--out", "~nonexistentuser/x", "--out '~nonexistentuser/x' starts with ~nonexistentuser, but there is no "
+                                             "user 'nonexistentuser'"),
+    ("reproduce", "OAPO_FIGURES", "~nonexistentuser/x", "OAPO_FIGURES '~nonexistentuser/x' starts with ~nonexistentuser, "
+                                                        "but there is no user"),
+    ("book", "--out", "~nonexistentuser/x", "--out '~nonexistentuser/x' starts with ~nonexistentuser"),
+    ("train", "--out", "loopA", "--out 'loopA' cannot be used: it runs through a loop of symbolic links"),
+    ("train", "--out", "n" * 300, "cannot be used: a name in it is longer than the file system allows"),
+    # neighbours: another flag, the variable, the other commands, a whole path too long, a FIFO
+    ("train", "--tensorboard", "loopA/board", "--tensorboard 'loopA/board' cannot be used: it runs through a loop"),
+    ("reproduce", "OAPO_FIGURES", "n" * 300, "OAPO_FIGURES 'nnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnn'... (300 "
+                                             "characters) cannot be used: a name in it is longer"),
+    ("book", "--out", "loopA", "--out 'loopA' cannot be used: it runs through a loop of symbolic links"),
+    ("train", "--out", "/".join(["d" * 200] * 25), "(5024 characters) cannot be used: a name in it is longer"),
+    ("train", "--out", "pipe", "--out 'pipe' is a FIFO (named pipe); allowed: a folder"),
+])
+def test_a_path_the_system_refuses_is_named_by_its_cause(tmp_path, capsys, monkeypatch, command, where, value, words):
+    """~nonexistentuser ended in "RuntimeError: Could not determine home directory (a bug in
+    oapo_lite?)", a loop was called a link to a missing file, a long name a bare [Errno 36]."""
+    monkeypatch.chdir(tmp_path)
+    Path("loopA").symlink_to("loopB")
+    Path("loopB").symlink_to("loopA")
+    os.mkfifo("pipe")
+    if where == "OAPO_FIGURES":
+        monkeypatch.setenv("OAPO_FIGURES", value)
+        argv = ["reproduce", "--figures", "fig1", "--skip-notebooks"]
+    else:
+        argv = [command, *(QUICK if command == "train" else []), *(["--out", "o"] if where != "--out" else []),
+                where, value]
+    assert words in cli_error(capsys, *argv)
+
+
+def test_a_full_disk_under_book_is_one_line_naming_the_out_device(tmp_path, capsys, monkeypatch):
+    """Sphinx's 52-line crash report came before the one line, and a failed copy named the
+    source notebook rather than the --out device."""
+    from oapo_lite.study.report import book
+
+    monkeypatch.setattr(book, "check_packages", lambda: None)
+    monkeypatch.setattr(book, "mathjax_dir", lambda: tmp_path / "mathjax")
+    (tmp_path / "mathjax").mkdir()
+    report = "\n".join(["Traceback (most recent call last):", *["  a frame"] * 48,
+                        "OSError: [Errno 28] No space left on device",
+                        "The full traceback has been saved in /tmp/sphinx-err-x.log, if you want to report the issue."])
+    monkeypatch.setattr(book.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 2, "", report))
+    out = tmp_path / "site"
+    assert cli_error(capsys, "book", "--out", str(out)) == (f"error: no space left on the device: {out}; free some "
+                                                              "space or write elsewhere (--out, OAPO_FIGURES)\n")
+
+    def full(source, target, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device", str(source))
+
+    monkeypatch.setattr(book.shutil, "copy2", full)
+    assert f"no space left on the device: {out};" in cli_error(capsys, "book", "--out", str(out))
+
+
+def test_book_without_its_packages_says_how_to_install_them(tmp_path, capsys):
+    from oapo_lite.study.report import book
+
+    try:
+        book.check_packages()
+        pytest.skip("the book's packages are installed here")
+    except ImportError:
+        pass
+    assert "not installed; run `make book-deps`" in cli_error(capsys, "book", "--out", str(tmp_path / "site"))
+
+
+# ---------------------------------------------------------------- issue 53: counts that mean what they say
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--plan", "--workers", "1" + "0" * 23], "'100000000000000000000000' is invalid; allowed: an integer in [1, 1024]"),
+    (["--workers", "1025"], "'1025' is invalid; allowed: an integer in [1, 1024]"),
+])
+def test_a_worker_count_beyond_any_machine_is_refused(capsys, argv, words):
+    """The plan priced 10^23 workers."""
+    assert words in cli_error(capsys, "reproduce", *argv)
+    from oapo_lite.study.runs import costs
+
+    for call in (lambda: costs.plan("smoke", ["fig1"], workers=10**23),
+                 lambda: experiments.run_all("smoke", ["fig1"], workers=10**23)):
+        with pytest.raises(ValueError, match=r"workers = 100000000000000000000000 is invalid; allowed: an integer in "
+                                             r"\[1, 1024\]"):
+            call()
+
+
+# ---------------------------------------------------------------- issue 53: first contact
+
+
+def test_help_gives_a_usage_line_and_the_commands_without_markup(capsys):
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: python -m oapo_lite {train,reproduce,book}") and "``" not in out
+    assert all(f"\n  {name} " in out for name in cli.COMMANDS)
+
+
+@pytest.mark.parametrize("command", ["train", "reproduce", "book"])
+def test_a_commands_help_answers_before_the_heavy_imports(command):
+    """train --help and reproduce --help took 4-6 s, importing torch before parsing a flag."""
+    code = (f"import sys; from oapo_lite.__main__ import main\ntry:\n    main([{command!r}, '--help'])\n"
+            "except SystemExit:\n    pass\nprint('torch' in sys.modules, 'pandas' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and f"python -m oapo_lite {command}" in done.stdout, done.stderr
+    assert done.stdout.split()[-2:] == ["False", "False"], done.stdout
+
+
+def test_the_plan_explains_its_columns(capsys, monkeypatch, tmp_path):
+    from oapo_lite.study.runs import costs
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    assert cli.main(["reproduce", "--budget", "smoke", "--figures", "fig1", "--plan"]) == 0
+    out = capsys.readouterr().out
+    head = out.splitlines()[0].split("  ")
+    legend = costs.LEGEND.replace("\n", " ")
+    assert [c.strip() for c in head if c.strip()] == ["figure", "runs", "env steps", "on disk", "to train",
+                                                       "steps to train", "CPU hours", "from"]
+    assert all(f"{word} (" in legend or f"{word}:" in legend for word in ("on disk", "CPU hours", "from", "records",
+                                                                          "table", "none"))
+    assert "- (nothing to train)" in legend and costs.LEGEND in out
+
+
+def test_every_apt_install_is_quiet_and_without_recommends():
+    """make browser installed 116 packages and printed apt's whole output."""
+    makefile = (Path(cli.__file__).parents[1] / "Makefile").read_text().replace("\\\n", " ")  # continued lines
+    recipes = re.findall(r"apt-get install[^\n]*", makefile)
+    assert len(recipes) == 2 and all("--no-install-recommends" in r and "-qq" in r and "> /dev/null" in r
+                                     for r in recipes)

@@ -1,20 +1,23 @@
 """Bad training input and damaged run folders: a config value, an argument of ``train`` or a
 checkpoint that cannot be used is named with what to do; a damaged checkpoint is trained again
 from the start; concurrent and killed writers leave nothing behind and train nothing twice."""
+import contextlib
 import errno
 import os
 import re
+import shutil
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 import torch
 
-from bad_input import QUICK, SMALL, cli_error
+from bad_input import QUICK, SMALL, cli_error, fifo, unix_socket
 from oapo_lite import __main__ as cli, store
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig, readers
@@ -53,10 +56,10 @@ def test_a_damaged_checkpoint_is_named_with_what_to_do(tmp_path, capsys, damage)
 
 def test_reproduce_trains_a_run_with_a_damaged_checkpoint_again(tmp_path, capfd):
     cfg = TrainConfig(algo="oappo", **SMALL)
-    rows, error = train_job(cfg, str(tmp_path / "fresh"))
+    rows, error, _ = train_job(cfg, str(tmp_path / "fresh"))
     (tmp_path / "damaged").mkdir()
     (tmp_path / "damaged" / "checkpoint.pt").write_bytes(b"not a checkpoint")
-    again, error_again = train_job(cfg, str(tmp_path / "damaged"))
+    again, error_again, _ = train_job(cfg, str(tmp_path / "damaged"))
     assert error is None and error_again is None
     pd.testing.assert_frame_equal(learning(rows), learning(again))
     assert f"checkpoint {tmp_path / 'damaged' / 'checkpoint.pt'} is damaged" in capfd.readouterr().err
@@ -237,12 +240,12 @@ def _ck_damage(kind):
 ])
 def test_a_checkpoint_missing_or_garbling_an_entry_is_damaged_named_and_trained_again(tmp_path, capfd, kind, words):
     cfg = TrainConfig(algo="oappo", **SMALL)
-    first, _ = train_job(cfg, str(tmp_path))
+    first, _, _ = train_job(cfg, str(tmp_path))
     path = tmp_path / "checkpoint.pt"
     torch.save(_ck_damage(kind)(load_checkpoint(tmp_path)), path)
     with pytest.raises(store.DamagedFile, match=f"checkpoint {re.escape(str(path))} .*{re.escape(words)}"):
         train(cfg, tmp_path, progress=False)
-    again, error = train_job(cfg, str(tmp_path))  # reproduce's way: named, then trained again from the start
+    again, error, _ = train_job(cfg, str(tmp_path))  # reproduce's way: named, then trained again from the start
     assert error is None and words in capfd.readouterr().err
     pd.testing.assert_frame_equal(learning(first), learning(again))
 
@@ -257,3 +260,115 @@ def test_a_checkpoint_whose_record_contradicts_itself_is_named_as_damaged(tmp_pa
         torch.save(broken, tmp_path / "checkpoint.pt")
         with pytest.raises(store.DamagedFile, match=f"checkpoint {tmp_path}/checkpoint.pt is damaged: .*{words}"):
             train(cfg, tmp_path, progress=False)
+
+
+# ---------------------------------------------------------------- issue 53: a checkpoint that is no file
+
+
+@pytest.mark.parametrize("kind", ["FIFO", "socket", "folder"])
+def test_a_checkpoint_that_is_no_regular_file_is_named_and_never_opened(tmp_path, kind):
+    """torch.load on a FIFO blocked for ever, and so did the rerun its error advised."""
+    cfg = TrainConfig(algo="oappo", **SMALL)
+    path = tmp_path / "checkpoint.pt"
+    with contextlib.ExitStack() as stack:
+        if kind == "FIFO":
+            stack.enter_context(fifo(path))
+        elif kind == "socket":
+            stack.enter_context(unix_socket(path))
+        else:
+            path.mkdir()
+        what = {"FIFO": "a FIFO (named pipe)", "socket": "a socket", "folder": "a folder"}[kind]
+        with pytest.raises(store.NotAFile, match=re.escape(f"checkpoint {path} is {what}, not a file; delete or move it")):
+            train(cfg, tmp_path, progress=False)
+        with pytest.raises(store.NotAFile, match=re.escape(f"checkpoint {path} is {what}")):
+            load_checkpoint(tmp_path)
+    if kind != "FIFO":  # what the message says works
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+        assert len(train(cfg, tmp_path, progress=False)) == len(cfg.eval_steps)
+
+
+def test_a_fifo_checkpoint_is_one_line_on_the_command_line(tmp_path, capsys):
+    assert cli.main(["train", *QUICK, "--out", str(tmp_path)]) == 0
+    (run,) = tmp_path.iterdir()
+    (run / "checkpoint.pt").unlink()
+    with fifo(run / "checkpoint.pt"):
+        err = cli_error(capsys, "train", *QUICK, "--out", str(tmp_path))
+    assert f"checkpoint {run / 'checkpoint.pt'} is a FIFO (named pipe), not a file; delete or move it" in err
+
+
+# ---------------------------------------------------------------- issue 53: train's arguments, checked first
+
+
+@pytest.mark.parametrize("kw, error, words", [
+    (dict(callback="x"), TypeError, "train's callback must be None or callable with an iteration's metrics, got 'x'"),
+    (dict(callback=5), TypeError, "train's callback must be None or callable"),
+    (dict(tensorboard="/proc/x"), ValueError, "train's tensorboard '/proc/x' cannot be written (no such file or folder)"),
+    (dict(tensorboard="a_file"), ValueError, "train's tensorboard 'a_file' is a file; allowed: a folder"),
+    (dict(tensorboard="loop/x"), ValueError, "train's tensorboard 'loop/x' cannot be used: it runs through a loop"),
+    (dict(progress="no"), TypeError, "train's progress must be True or False, got 'no'"),
+])
+def test_every_callback_and_folder_argument_of_train_is_checked_before_the_first_iteration(
+        tmp_path, monkeypatch, kw, error, words):
+    """Before issue 53 a callback failed after the first iteration and /proc/x raised a bare
+    FileNotFoundError; now nothing is made, not even the run folder."""
+    monkeypatch.chdir(tmp_path)
+    Path("a_file").write_text("x")
+    Path("loop").symlink_to("loop")
+    with pytest.raises(error, match=re.escape(words)):
+        train(TrainConfig(**SMALL), tmp_path / "run", **kw)
+    assert not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------- issue 53: messages that name the real cause
+
+
+@pytest.mark.parametrize("kw, words", [
+    (dict(algo="seac", n_step=1000, steps=16_000), "steps = 16000 is invalid; allowed: >= n_envs * n_step = 32000"),
+    (dict(algo="seps", n_step=1000, steps=16_000), "steps = 16000 is invalid; allowed: >= n_envs * n_step = 32000"),
+    (dict(algo="oappo", rollout_len=1000, steps=16_000), "allowed: >= n_envs * rollout_len = 32000"),
+    (dict(algo="oappo", n_envs=1, rollout_len=1, steps=4), "n_envs = 1 and rollout_len = 1 give one sample per "
+                                                           "iteration; allowed: n_envs * rollout_len >= 2"),
+    (dict(algo="happo", n_envs=1, rollout_len=1, steps=4), "give one sample per iteration"),
+])
+def test_a_config_names_the_field_that_sets_what_it_refuses(kw, words):
+    """SEAC's rollout is n_step long: a message naming rollout_len named a flag SEAC refuses; a
+    batch of one sample was accepted and then reported as a non-finite Eq. 8 loss."""
+    with pytest.raises(ValueError, match=re.escape(words)):
+        TrainConfig(**kw)
+    TrainConfig(algo="oappo", n_envs=2, rollout_len=1, steps=4)  # two samples have a spread
+
+
+def test_a_run_that_diverges_says_whether_its_last_checkpoint_already_holds_non_finite_values(tmp_path):
+    cfg = TrainConfig(algo="happo", **SMALL)
+    train(cfg, tmp_path, progress=False)
+    state = RunState.start(cfg)
+    good = str(_diverged_at(Diverged("the PPO loss (Eq. 8)", 0), state, tmp_path))
+    assert "the last checkpoint" in good and "non-finite" not in good
+    ck = load_checkpoint(tmp_path)
+    name = next(iter(ck["actors"]))
+    ck["actors"][name] = torch.full_like(ck["actors"][name], float("nan"))
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    bad = str(_diverged_at(Diverged("the PPO loss (Eq. 8)", 0), state, tmp_path))
+    assert f"already holds non-finite values (actors/{name})" in bad and "--no-resume" in bad and "good" not in bad
+
+
+def test_a_checkpoint_whose_cost_is_below_its_last_row_is_damaged(tmp_path):
+    """The run's sums go on from the checkpoint's cost: one below what a row already recorded
+    would make cpu_s fall in the next rows."""
+    cfg = TrainConfig(algo="happo", **SMALL)
+    train(cfg, tmp_path, progress=False)
+    ck = load_checkpoint(tmp_path)
+    ck["cost"] = {"cpu_s": 0.0, "wall_s": ck["cost"]["wall_s"]}
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    with pytest.raises(store.DamagedFile, match=r"its cost cpu_s = 0.0 is below its last row's .*; a sum so far never"):
+        load_checkpoint(tmp_path)
+
+
+def test_a_job_says_whether_it_trained_or_found_its_run_finished(tmp_path):
+    """Two ``reproduce`` on one cache both reported the runs as trained; the second found them
+    finished once it had the lock, and trained nothing."""
+    cfg = TrainConfig(algo="oappo", **SMALL)
+    rows, error, trained = train_job(cfg, str(tmp_path))
+    again, error_again, trained_again = train_job(cfg, str(tmp_path))
+    assert (error, error_again, trained, trained_again) == (None, None, True, False)
+    pd.testing.assert_frame_equal(rows, again)

@@ -1,19 +1,24 @@
 """Bad input to the study and damaged run caches: a run file is checked when read, a library call
 with wrong input names it, a notebook parameter is checked in the first cell."""
+import contextlib
 import dataclasses
+import os
 import re
 import shutil
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import fakes
-from bad_input import SMALL
+from bad_input import SMALL, fifo, unix_socket
 from oapo_lite import store
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.results import learning
-from oapo_lite.study.catalogue import figures
+from oapo_lite.study.catalogue import figures, grid
 from oapo_lite.study.catalogue.metrics import FRAC_OPT, WIN_RATE
 from oapo_lite.study.catalogue.tests import Claim
 from oapo_lite.study.judge import evidence, statistics, verdicts
@@ -262,3 +267,192 @@ def test_the_statistics_take_a_frame_with_no_run(tmp_path):
     assert plotting.learning_curves(empty).texts[0].get_text() == "no runs on disk"
     assert np.isnan(statistics.probability_of_improvement([np.nan, np.nan], [1, 2]))
     assert statistics.probability_of_improvement([3, 1], [1, 2]) == 0.625  # (1 + 0.5 + 0 + 1) / 4: brute force
+
+
+# ---------------------------------------------------------------- issue 53: a run file that is no file
+
+
+@pytest.mark.parametrize("kind", ["FIFO", "socket", "link to a device"])
+def test_a_run_file_that_is_no_regular_file_is_named_and_never_opened(tmp_path, monkeypatch, capsys, kind):
+    """load_figure read a FIFO in place of a cached run's CSV for ever; so did the plan."""
+    from oapo_lite.study.runs import costs
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    (cfg,) = [c for _, c in figures.figure_runs("fig1", "smoke")]
+    path = experiments.run_path(cfg, "smoke")
+    path.parent.mkdir(parents=True)
+    what = {"FIFO": "a FIFO (named pipe)", "socket": "a socket", "link to a device": "a character device"}[kind]
+    with contextlib.ExitStack() as stack:
+        if kind == "FIFO":
+            stack.enter_context(fifo(path))
+        elif kind == "socket":
+            stack.enter_context(unix_socket(path))
+        else:
+            path.symlink_to("/dev/zero")
+        for call in (lambda: experiments.load_figure("fig1", "smoke"), lambda: experiments.missing_runs("fig1", "smoke"),
+                     lambda: costs.plan("smoke", ["fig1"])):
+            with pytest.raises(store.NotAFile, match=re.escape(f"run file {path} is {what}, not a file; delete or move")):
+                call()
+
+
+def test_a_figure_csv_and_a_cost_table_that_are_no_files_are_named(tmp_path, monkeypatch):
+    from oapo_lite.study.runs import costs
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    for label, cfg in figures.figure_runs("fig1", "smoke"):
+        fakes.write_run(cfg, "smoke", lambda s: s / 400)
+    with fifo(experiments.data_dir("smoke") / "fig1.csv") as path:
+        with pytest.raises(store.NotAFile, match=re.escape(f"figure file {path} is a FIFO (named pipe)")):
+            experiments.export_figure("fig1", "smoke")
+    with fifo(tmp_path / "costs.csv") as path:
+        with pytest.raises(store.NotAFile, match=re.escape(f"cost table {path} is a FIFO (named pipe)")):
+            costs.table(path)
+
+
+# ---------------------------------------------------------------- issue 53: a name that names nothing
+
+
+@pytest.mark.parametrize("figure, budget, words", [
+    ("fig4_smax", "student", "figure 'fig4_smax' has no runs at budget 'student'; it has runs at ['smoke', 'paper', "
+                             "'cpu']"),
+    ("fig5b", "student", "figure 'fig5b' has no runs at budget 'student'; it has runs at ['smoke', 'paper', 'paper20', "
+                         "'cpu']"),  # left out by the budget, not by the figure
+    ("fig_dose_smax", "smoke", "figure 'fig_dose_smax' has no runs at budget 'smoke'; it has runs at ['cpu']"),
+    ("fig1", "Student", "unknown budget 'Student'; choose from"),
+    ("fig_1", "smoke", "unknown figure 'fig_1'; choose from"),
+])
+def test_a_figure_without_runs_at_a_budget_is_refused_not_read_as_empty(figure, budget, words):
+    """load_figure('fig4_smax', 'student') returned an empty frame without a word."""
+    with pytest.raises(ValueError, match=re.escape(words)):
+        experiments.load_figure(figure, budget)
+    if words.startswith("figure"):  # the catalogue itself: which budgets train it
+        assert [b for b in ("smoke", "paper", "paper20", "cpu", "student")
+                if figures.runs_of(figure, b)] == eval(words.rsplit("it has runs at ", 1)[1])
+        with pytest.raises(ValueError, match=re.escape(words)):
+            verdicts.at_budget(figures.get_figure(figure), budget, required=True)
+
+
+# ---------------------------------------------------------------- issue 53: a string, a bool
+
+
+@pytest.mark.parametrize("call, error, words", [
+    (lambda: experiments.load_figure("fig1", "smoke", skip_missing="no"), TypeError,
+     "skip_missing must be True or False, got 'no'"),
+    (lambda: experiments.read_figure("fig1", "smoke", skip_missing=1), TypeError, "skip_missing must be True or False, got 1"),
+    (lambda: experiments.run_all("smoke", ["fig1"], progress="no"), TypeError,
+     "run_all's progress must be True, False or \"lines\", got 'no'"),
+    (lambda: experiments.train_runs("smoke", "fig1"), TypeError, "train_runs' figures must be a sequence of names, got the "
+                                                                 "string 'fig1'"),
+    (lambda: experiments.grid_runs("smoke", "fig1"), TypeError, "figures must be a sequence of names, got the string"),
+    (lambda: costs_module().plan("smoke", "fig1"), TypeError, "figures must be a sequence of names, got the string"),
+    (lambda: costs_module().plan("smoke", ["fig1"], from_nothing="no"), TypeError,
+     "from_nothing must be True or False, got 'no'"),
+    (lambda: verdicts.at_budget(figures.get_figure("fig3b"), "cpu", required="yes"), TypeError,
+     "at_budget's required must be True or False, got 'yes'"),
+    (lambda: verdicts.glance("cpu"), TypeError, "budgets must be a sequence of names, got the string 'cpu'"),
+    (lambda: grid.get_budget(["smoke"]), ValueError, "unknown budget ['smoke'] (a list, where a budget is one name); "
+                                                     "choose from"),
+    (lambda: grid.get_budget(None), ValueError, "unknown budget None (a NoneType, where a budget is one name)"),
+])
+def test_a_string_for_a_sequence_and_a_non_bool_for_a_bool_are_refused(tmp_path, monkeypatch, call, error, words):
+    """Read as truthy, skip_missing="no" meant yes; a string of figures was split into letters;
+    papermill's -y "budget: [smoke]" ended in TypeError: unhashable type: 'list'."""
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    with pytest.raises(error, match=re.escape(words)):
+        call()
+
+
+def costs_module():
+    from oapo_lite.study.runs import costs
+
+    return costs
+
+
+def test_a_budget_that_is_no_name_stops_the_first_cell(tmp_path):
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS, NotebookFailed, run_notebook
+
+    with pytest.raises(NotebookFailed, match=r"cell 4 .*unknown budget \['smoke'\] \(a list, where a budget is one name"):
+        run_notebook(NOTEBOOKS / "10_mazes_fig3a_5a.ipynb", tmp_path / "out.ipynb", {"budget": ["smoke"]})
+
+
+# ---------------------------------------------------------------- issue 53: values in memory and over time
+
+
+@pytest.mark.parametrize("column", ["cpu_s", "wall_s"])
+def test_a_cumulative_cost_that_falls_is_refused_on_read_and_in_memory(tmp_path, monkeypatch, column):
+    """A cpu_s that fell loaded without a word and priced the plan."""
+    from oapo_lite.study.runs import costs
+
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    cfg = TrainConfig(algo="oappo", **dict(SMALL, steps=2000))
+    n = len(cfg.eval_steps)
+    sums = np.arange(1.0, n + 1)
+    fell = sums.copy()
+    fell[4] = 2.5  # below row 4's 4.0
+    fakes.write_run(cfg, "smoke", lambda s: s / 2000, grid=1, cpu_s=sums, wall_s=sums)
+    experiments.read_run(cfg, "smoke")  # rising: whole
+    assert costs.recorded([(cfg, experiments.read_run(cfg, "smoke"))])  # and priced
+    fakes.write_run(cfg, "smoke", lambda s: s / 2000, grid=1, **{"cpu_s": sums, "wall_s": sums, column: fell})
+    words = rf"its {column} column at row 5 \(step 800\) holds 2.5; allowed: a number >= 4.0, its value at an earlier step"
+    with pytest.raises(store.DamagedFile, match=words):
+        experiments.read_run(cfg, "smoke")
+    frame = pd.DataFrame({"step": cfg.eval_steps, "cpu_s": sums, "wall_s": sums}).assign(**{column: fell})
+    with pytest.raises(ValueError, match=words):
+        costs.recorded([(cfg, frame)])
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda df: df.assign(frac_opt=df["frac_opt"] * 10), r"its frac_opt column at row \d+ \(step \d+\) holds [\d.]+; "
+                                                          r"allowed: a number <= 1.00001"),
+    (lambda df: df.assign(eval_success=df["eval_success"] + 1), r"its eval_success column .* allowed: a number in \[0, 1\]"),
+    (lambda df: df.assign(seed=df["seed"].astype(float) + 0.5), None),  # not a column a run's results declare
+])
+def test_judge_checks_a_frame_as_the_reader_checks_a_run_file(change, words):
+    """frac_opt x 10 in memory changed the verdicts; the reader would have refused the file."""
+    df = experiments.load_figure("fig3b", "paper")
+    before = [v.status for v in verdicts.judge("fig3b", df)]
+    if words is None:
+        verdicts.judge("fig3b", change(df))
+        return
+    with pytest.raises(ValueError, match=f"the runs of fig3b given to judge are not what runs write: {words}"):
+        verdicts.judge("fig3b", change(df))
+    assert [v.status for v in verdicts.judge("fig3b", df)] == before
+
+
+# ---------------------------------------------------------------- issue 53: a rerun after kill -9 matches
+
+
+KILLED_DRIVER = """
+import os, signal, sys
+from oapo_lite.study.runs import executors, experiments
+at, real = int(sys.argv[1]), executors.train
+
+def train(cfg, out, callback, **kw):  # killed right after iteration ``at`` (and its checkpoint, if any)
+    return real(cfg, out, callback=lambda m: callback(m) or (m["iteration"] == at and os.kill(os.getpid(), 9)), **kw)
+
+executors.train = train
+experiments.run_all("smoke", figures=("fig1",), workers=1, progress=False)
+"""
+
+
+@pytest.mark.parametrize("at", [1, 2], ids=["mid-run, before any checkpoint", "after the last checkpoint"])
+def test_a_reproduce_killed_and_rerun_writes_the_uninterrupted_files(tmp_path, at):
+    """Every run file and the figure's CSV equal the uninterrupted ones on every column but the
+    measured costs (``results.learning``, ASSUMPTIONS.md); a run found finished counts as on disk."""
+    whole, killed = tmp_path / "whole", tmp_path / "killed"
+    for folder, code, args in ((whole, "from oapo_lite.study.runs import experiments; experiments.run_all('smoke', "
+                                       "figures=('fig1',), workers=1, progress=False)", []),
+                               (killed, KILLED_DRIVER, [str(at)])):
+        done = subprocess.run([sys.executable, "-c", code, *args], env={**os.environ, "OAPO_FIGURES": str(folder)},
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == (-signal.SIGKILL if folder == killed else 0), done.stderr
+    monkeypatch_env = {**os.environ, "OAPO_FIGURES": str(killed)}
+    rerun = subprocess.run([sys.executable, "-c", "from oapo_lite.study.runs import experiments; c = experiments.run_all("
+                            "'smoke', figures=('fig1',), workers=1, progress=False); print(c.done, c.cached)"],
+                           env=monkeypatch_env, capture_output=True, text=True, timeout=600)
+    assert rerun.stdout.split() == (["1", "0"] if at == 1 else ["0", "1"]), rerun.stderr
+    files = sorted(p.relative_to(whole) for p in whole.rglob("*.csv") if "checkpoints" not in p.parts)
+    assert len(files) == 2 and files == sorted(p.relative_to(killed) for p in killed.rglob("*.csv")
+                                               if "checkpoints" not in p.parts)
+    for name in files:
+        pd.testing.assert_frame_equal(learning(pd.read_csv(whole / name)), learning(pd.read_csv(killed / name)))

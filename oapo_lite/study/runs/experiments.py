@@ -20,13 +20,13 @@ import numpy as np
 import pandas as pd
 
 from oapo_lite.algorithms import ALGOS
-from oapo_lite.cli import output_folder
+from oapo_lite.cli import boolean, names, output_folder, workers as cli_workers
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
 from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.store import DamagedFile, read_arrays, write_frame
-from oapo_lite.study.catalogue.figures import FIGURES, figure_runs, get_figure, runs_of
+from oapo_lite.store import DamagedFile, is_file, read_arrays, regular_file, write_frame
+from oapo_lite.study.catalogue.figures import FIGURES, figure_runs, get_figure, required_runs, runs_of
 from oapo_lite.study.catalogue.grid import COMMITTED, SHARED_RUNS, Run
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -64,9 +64,9 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
     (``results.COLUMNS``). A file that is not whole raises ``DamagedFile`` naming it (``run_all``
     then trains the run again). A file read before and unchanged since is not read again."""
     path = run_path(cfg, budget)
-    stat = path.stat()  # FileNotFoundError: not on disk
-    if path.is_dir():  # not a damaged result: something the cache must not overwrite
-        raise ValueError(f"run file {path} is a folder; delete or move it")
+    # FileNotFoundError: not on disk; a folder, a FIFO or a device is not a damaged result but
+    # something the cache must neither read nor overwrite (NotAFile)
+    stat = regular_file(path, "run file")
     version = (path, stat.st_mtime_ns, stat.st_size)  # the path names the config
     if version not in _CHECKED:
         if len(_CHECKED) > 4096:
@@ -213,7 +213,7 @@ def on_disk(cfg: TrainConfig, budget: str) -> bool:
 def grid_runs(budget: str, figures=FIGURES) -> list[Run]:
     """The distinct runs of some figures (a run shared by two figures is trained once)."""
     runs, seen = [], set()
-    for fig in figures:
+    for fig in names(figures, "figures"):
         for run in runs_of(fig, budget):
             if run.cfg.run_id() not in seen:
                 seen.add(run.cfg.run_id())
@@ -245,8 +245,8 @@ def _cost(cfg: TrainConfig) -> int:
 
 @dataclass
 class RunCount:
-    done: int
-    cached: int
+    done: int  # trained by this call
+    cached: int  # on disk before it, or finished by another process while it waited (``train_job``)
     failed: list[Failure] = field(default_factory=list)
 
 
@@ -263,8 +263,9 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise ValueError(f"workers = {workers!r} is invalid; allowed: an integer >= 1")
+    workers = cli_workers(workers, "workers")
+    if progress != "lines" and not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"run_all's progress must be True, False or \"lines\", got {progress!r}")
     figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
     todo, skipped = [], {}
     for run in grid_runs(budget, figures):
@@ -283,10 +284,11 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
     jobs = [(run, str(checkpoints / run.cfg.run_id())) for run in missing]
-    failed = []
+    failed, elsewhere = [], 0
     with tqdm(total=len(missing), desc=f"runs ({budget}, {executor})", disable=progress is not True) as bar:
-        for k, (run, rows, error) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
-                                                                              address=address), 1):
+        for k, (run, rows, error, trained) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
+                                                                                       address=address), 1):
+            elsewhere += error is None and not trained
             if error is None:
                 write_frame(rows, run_path(run.cfg, budget))
             elif error.startswith(executors.RESOURCE):  # every other run would fail alike: stop them all
@@ -301,7 +303,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
                       f"{run.cfg.run_id()}", flush=True)
     for figure in figures:
         export_figure(figure, budget)
-    return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
+    return RunCount(done=len(missing) - len(failed) - elsewhere, cached=len(todo) - len(missing) + elsewhere,
+                    failed=failed)
 
 
 def export_figure(figure, budget: str) -> Path | None:
@@ -313,7 +316,7 @@ def export_figure(figure, budget: str) -> Path | None:
         return None  # not a grid figure, no runs at this budget, or not all of them yet
     df, _ = read_figure(name, budget)
     path = data_dir(budget) / f"{name}.csv"
-    old = path.read_bytes() if path.exists() else None
+    old = path.read_bytes() if is_file(path, "figure file") else None
     staged = path.with_name(f".{path.name}.new")
     write_frame(df, staged)
     if staged.read_bytes() == old:
@@ -331,6 +334,7 @@ def missing_runs(figure: str, budget: str) -> list[Run]:
 def train_runs(budget: str, figures, workers: int = 2) -> None:
     """Train the runs of ``figures`` at ``budget`` that are not on disk yet, and raise if any
     failed: loading a figure never trains, so a notebook that may train says so with this call."""
+    figures = names(figures, "train_runs' figures")
     failed = run_all(budget, figures=figures, workers=workers, progress=False).failed
     if failed:
         raise RuntimeError(f"{len(failed)} run(s) of {[get_figure(f).id for f in figures]} failed "
@@ -355,6 +359,7 @@ def versions(figure: str, budget: str) -> tuple:
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
     with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""
+    skip_missing = boolean(skip_missing, "skip_missing")
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
         try:
@@ -374,8 +379,10 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
 
 
 def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
-    """``read_figure``, saying what it left out. Reads only: nothing is trained (``train_runs``)
-    and nothing written (``export_figure``)."""
+    """``read_figure``, saying what it left out; a figure with no runs at ``budget`` is refused,
+    naming the budgets it has runs at. Reads only: nothing is trained (``train_runs``) and nothing
+    written (``export_figure``)."""
+    required_runs(figure, budget)
     df, missing = read_figure(figure, budget, skip_missing)
     if df.empty:
         return df
