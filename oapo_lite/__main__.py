@@ -130,8 +130,8 @@ def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
     per = cfg.iteration_steps
     if cfg.steps % per:
         below, above = cfg.steps // per * per, (cfg.steps // per + 1) * per
-        parser.error(f"--steps {cfg.steps} is not a whole number of iterations of n_envs x {cfg.rollout_field} = {per} env "
-                     f"steps; allowed: a multiple of {per}, e.g. {below or above} or {above}")
+        parser.error(f"--steps {cfg.steps} is not a whole number of iterations of n_envs x {cfg.rollout_field} = {per} "
+                     f"env steps; allowed: a multiple of {per}, e.g. {below or above} or {above}")
 
 
 def train_main(argv: list[str]) -> int:

@@ -171,13 +171,14 @@ def check_values(df: pd.DataFrame, runs=()) -> None:
         if wrong.any():
             i = int(np.flatnonzero(wrong)[0])
             seats = sizes.get(run_of[i], set())
-            allowed = _allowed(c) if len(seats) < 2 else f"the same number of seats in every matrix ({sorted(seats)} here)"
+            allowed = (_allowed(c) if len(seats) < 2 else
+                       f"the same number of seats in every matrix ({sorted(seats)} here)")
             raise _fail(name, i, steps[i], column.iloc[i], allowed)
         if c.cumulative:
             i, before = _falls(df, name, list(runs))
             if i is not None:
-                raise _fail(name, i, steps[i], column.iloc[i], f"a number >= {before!r}, its value at an earlier step of "
-                                                              "the run (it sums the run so far)")
+                raise _fail(name, i, steps[i], column.iloc[i],
+                            f"a number >= {before!r}, its value at an earlier step of the run (it sums the run so far)")
 
 
 def _falls(df: pd.DataFrame, name: str, runs: list[str]) -> tuple[int | None, float | None]:

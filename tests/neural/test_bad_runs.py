@@ -364,11 +364,24 @@ def test_a_checkpoint_whose_cost_is_below_its_last_row_is_damaged(tmp_path):
         load_checkpoint(tmp_path)
 
 
-def test_a_job_says_whether_it_trained_or_found_its_run_finished(tmp_path):
-    """Two ``reproduce`` on one cache both reported the runs as trained; the second found them
-    finished once it had the lock, and trained nothing."""
+def test_a_job_that_another_process_finished_while_it_waited_says_it_trained_nothing(tmp_path):
+    """Two ``reproduce`` on one cache both reported the runs as trained: the second waited for the
+    first's lock and then found each run finished. A run written again from its own finished
+    checkpoint (its results file was damaged) still counts as done here."""
     cfg = TrainConfig(algo="oappo", **SMALL)
-    rows, error, trained = train_job(cfg, str(tmp_path))
-    again, error_again, trained_again = train_job(cfg, str(tmp_path))
-    assert (error, error_again, trained, trained_again) == (None, None, True, False)
-    pd.testing.assert_frame_equal(rows, again)
+    rows, error, trained = train_job(cfg, str(tmp_path / "other"))
+    assert (error, trained) == (None, True) and train_job(cfg, str(tmp_path / "other"))[1:] == (None, True)
+    run = tmp_path / "run"
+    run.mkdir()
+    held = store.Lock(run / ".lock")  # the first process, training
+    assert held.acquire(wait=False)
+    result = {}
+    second = threading.Thread(target=lambda: result.update(outcome=train_job(cfg, str(run))))
+    second.start()
+    time.sleep(1.0)
+    shutil.copy(tmp_path / "other" / "checkpoint.pt", run / "checkpoint.pt")  # the first one's last checkpoint
+    held.release()
+    second.join(60)
+    again, error_again, trained_again = result["outcome"]
+    assert (error_again, trained_again) == (None, False)
+    pd.testing.assert_frame_equal(learning(rows), learning(again))

@@ -31,15 +31,16 @@ PACKAGE = Path(__file__).resolve().parents[2]
 
 
 def train_job(cfg, checkpoints: str):
-    """Train one run; (rows, None, trained), or (None, why, False) when it raises. ``trained``:
-    whether this job trained any iteration; False where the run's checkpoint was already finished
-    (another ``reproduce`` trained it while this one waited for its lock). A failed run is reported by
+    """Train one run; (rows, None, trained), or (None, why, False) when it raises. ``trained`` is
+    False where another process wrote the run's checkpoint while this job waited for its lock and
+    left nothing to train (two ``reproduce`` on one cache: the first trains). A failed run is reported by
     the driver while the others go on, with one line where the error says what to do
     (``cli.KNOWN``: a bad value, a file in the way), else its traceback (a bug). A damaged
     checkpoint is named and the run trained again from the start (the cache's runs are
     deterministic). Memory, disk or permissions running out is (None, ``RESOURCE`` + one line):
     the driver then stops."""
-    iterations = []
+    iterations, checkpoint = [], Path(checkpoints) / "checkpoint.pt"
+    before = _written(checkpoint)
     try:
         try:
             rows = train(cfg, checkpoints, progress=False, callback=iterations.append)
@@ -52,7 +53,15 @@ def train_job(cfg, checkpoints: str):
             return None, RESOURCE + resource, False
         why = f"error: {' '.join(str(err).split())}" if isinstance(err, KNOWN) else traceback.format_exc()
         return None, why, False
-    return rows, None, bool(iterations)
+    return rows, None, bool(iterations) or _written(checkpoint) == before
+
+
+def _written(path: Path) -> int | None:
+    """When ``path`` was last written (None: absent)."""
+    try:
+        return os.stat(path).st_mtime_ns
+    except OSError:
+        return None
 
 
 RESOURCE = "resource: "  # how a job's error says that memory, disk or permissions ran out
@@ -248,9 +257,15 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
     if address is not None:
         if address != "auto":
             reach(address)
-        # a head that answers but is no Ray GCS: Ray's own connect loop, bounded by the same wait
-        os.environ.setdefault("RAY_gcs_server_port_wait_time_s", str(CONNECT_S))
-        ray.init(address=address, **init_kwargs)
+        # a head that answers but is no Ray GCS: Ray's own connect loop, bounded by the same wait (for
+        # this connection only: a private cluster's start reads the variable too)
+        given = os.environ.get("RAY_gcs_server_port_wait_time_s")
+        os.environ["RAY_gcs_server_port_wait_time_s"] = given or str(CONNECT_S)
+        try:
+            ray.init(address=address, **init_kwargs)
+        finally:
+            if given is None:
+                del os.environ["RAY_gcs_server_port_wait_time_s"]
         return ray, True
     # A private cluster listens on loopback only (Ray binds its servers to the node's address) and
     # without a dashboard, so no other machine can reach it; ``init_kwargs`` may ask otherwise
