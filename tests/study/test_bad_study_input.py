@@ -321,10 +321,17 @@ def test_a_figure_csv_and_a_cost_table_that_are_no_files_are_named(tmp_path, mon
     ("fig1", "Student", "unknown budget 'Student'; choose from"),
     ("fig_1", "smoke", "unknown figure 'fig_1'; choose from"),
 ])
-def test_a_figure_without_runs_at_a_budget_is_refused_not_read_as_empty(figure, budget, words):
-    """load_figure('fig4_smax', 'student') returned an empty frame without a word."""
+def test_a_figure_without_runs_at_a_budget_is_refused_not_read_as_empty(capsys, figure, budget, words):
+    """load_figure('fig4_smax', 'student') returned an empty frame without a word. A notebook that
+    shows what is on disk (skip_missing) gets the empty frame, and the words."""
     with pytest.raises(ValueError, match=re.escape(words)):
         experiments.load_figure(figure, budget)
+    if not words.startswith("figure"):  # a name that names nothing is refused either way
+        with pytest.raises(ValueError, match=re.escape(words)):
+            experiments.load_figure(figure, budget, skip_missing=True)
+        return
+    assert experiments.load_figure(figure, budget, skip_missing=True).empty
+    assert f"warning: {words}" in capsys.readouterr().out
     if words.startswith("figure"):  # the catalogue itself: which budgets train it
         assert [b for b in ("smoke", "paper", "paper20", "cpu", "student")
                 if figures.runs_of(figure, b)] == eval(words.rsplit("it has runs at ", 1)[1])

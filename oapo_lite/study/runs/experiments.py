@@ -379,9 +379,16 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
 
 
 def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
-    """``read_figure``, saying what it left out; a figure with no runs at ``budget`` is refused,
-    naming the budgets it has runs at. Reads only: nothing is trained (``train_runs``) and nothing
-    written (``export_figure``)."""
+    """``read_figure``, saying what it left out. A figure with no runs at ``budget`` is refused,
+    naming the budgets it has runs at; with ``skip_missing`` (a notebook that shows what is on
+    disk at any budget) it is an empty frame and a warning that says so. Reads only: nothing is
+    trained (``train_runs``) and nothing written (``export_figure``)."""
+    if boolean(skip_missing, "skip_missing") and not runs_of(figure, budget):  # a bad name still raises here
+        try:
+            required_runs(figure, budget)
+        except ValueError as err:
+            print(f"warning: {err}")
+            return pd.DataFrame()
     required_runs(figure, budget)
     df, missing = read_figure(figure, budget, skip_missing)
     if df.empty:
