@@ -118,7 +118,6 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     """Write the Sphinx sources next to ``out`` and build the HTML site into ``out``; returns
     the site's index.html."""
     out = cli.output_folder(str(out), "--out")
-    check_packages()
     src = out.parent / f"{out.name}-src"
     if out.exists() and any(out.iterdir()) and not (out / ".buildinfo").exists():  # Sphinx's mark of its output
         raise ValueError(f"--out {out} holds files the book did not write; allowed: an empty or new folder, or the "
@@ -126,6 +125,7 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     if src.exists() and not (src / SOURCES_MARK).exists():  # never delete what the book did not write
         raise ValueError(f"{src} exists and was not written by the book (it writes its sources there); move it or "
                          "choose another --out")
+    check_packages()  # after the folders: a bad --out is named whatever is installed
     shutil.rmtree(src, ignore_errors=True)
     try:
         _write_sources(src, notebooks)
