@@ -332,6 +332,10 @@ def test_a_figure_without_runs_at_a_budget_is_refused_not_read_as_empty(capsys, 
         return
     assert experiments.load_figure(figure, budget, skip_missing=True).empty
     assert f"warning: {words}" in capsys.readouterr().out
+    with pytest.raises(ValueError, match=re.escape(words)):  # the reader beneath it, and the trainer of named figures
+        experiments.read_figure(figure, budget)
+    with pytest.raises(ValueError, match=re.escape(words)):
+        experiments.run_all(budget, [figure], workers=1, progress=False)
     if words.startswith("figure"):  # the catalogue itself: which budgets train it
         assert [b for b in ("smoke", "paper", "paper20", "cpu", "student")
                 if figures.runs_of(figure, b)] == eval(words.rsplit("it has runs at ", 1)[1])
@@ -412,6 +416,8 @@ def test_a_cumulative_cost_that_falls_is_refused_on_read_and_in_memory(tmp_path,
     (lambda df: df.assign(frac_opt=df["frac_opt"] * 10), r"its frac_opt column at row \d+ \(step \d+\) holds [\d.]+; "
                                                           r"allowed: a number <= 1.00001"),
     (lambda df: df.assign(eval_success=df["eval_success"] + 1), r"its eval_success column .* allowed: a number in \[0, 1\]"),
+    (lambda df: df.assign(frac_opt=-5.0), r"its frac_opt column at row 1 \(step 0\) holds -5.0; allowed: eval_return / "
+                                          r"the maze's optimum = "),  # in range, but not the return's fraction
     (lambda df: df.assign(seed=df["seed"].astype(float) + 0.5), None),  # not a column a run's results declare
 ])
 def test_judge_checks_a_frame_as_the_reader_checks_a_run_file(change, words):

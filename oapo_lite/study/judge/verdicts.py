@@ -252,6 +252,7 @@ def judge(figure, df: pd.DataFrame) -> list[Verdict]:
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     try:
         results.check_values(df, [c for c in ("env", "label", "seed") if c in df])
+        experiments.check_levels(df)
     except results.BadRows as err:
         raise ValueError(f"the runs of {fig.id} given to judge are not what runs write: {err}") from None
     evidence = {}

@@ -119,7 +119,7 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
     try:
         _check_iterations(df, cfg)
         results.check(df, cfg.flat())
-        _check_levels(df, cfg)
+        check_levels(df, cfg.env if cfg.env_fn is None else None)
     except results.BadRows as err:
         raise DamagedFile(f"run file {path} is damaged: {err}; {RETRAIN}") from None
     return df
@@ -148,22 +148,35 @@ def _check_iterations(df: pd.DataFrame, cfg: TrainConfig) -> None:
                                   f"(n_envs x rollout length) = {step / cfg.iteration_steps:g}")
 
 
-def _check_levels(df: pd.DataFrame, cfg: TrainConfig) -> None:
-    """What a row's config fixes beyond ``results.check``: on a maze, whose episodes always end and
+def check_levels(df: pd.DataFrame, env: str | None = "column", rows: np.ndarray | None = None) -> None:
+    """What a row's env fixes beyond ``results.check``: on a maze, whose episodes always end and
     whose optimum the oracle knows, every evaluation has a return, a success rate and that
-    return's fraction of the optimum."""
-    maze = env_registry.maze_of(cfg.env) if cfg.env_fn is None else None
-    if maze is None:
+    return's fraction of the optimum. ``env``: the env of every row (None: no maze's), or by
+    default each row's ``env`` column (a figure's runs, handed to ``verdicts.judge``); ``rows``:
+    the rows' numbers in the messages (by default their positions)."""
+    rows = np.arange(len(df)) if rows is None else rows
+    if env == "column":
+        for each in (df["env"].dropna().unique() if "env" in df else ()):
+            mine = (df["env"] == each).to_numpy()
+            check_levels(df[mine], each, rows[mine])
         return
-    optimum = _optimum(cfg.env)
-    for i, row in enumerate(df[["step", "eval_return", "frac_opt", "eval_success"]].itertuples(index=False)):
-        for name in ("eval_return", "frac_opt", "eval_success"):
-            if pd.isna(getattr(row, name)):
-                raise results.BadRows(f"its {name} column at row {i + 1} (step {row.step}) is empty; allowed: a "
-                                      "number (a maze's evaluation episodes always end)")
-        if not np.isclose(row.frac_opt * optimum, row.eval_return, rtol=1e-9, atol=1e-9):
-            raise results.BadRows(f"its frac_opt column at row {i + 1} (step {row.step}) holds {row.frac_opt!r}; "
-                                  f"allowed: eval_return / the maze's optimum = {row.eval_return / optimum!r}")
+    if env is None or env_registry.maze_of(env) is None:
+        return
+    steps = df["step"].tolist() if "step" in df else [None] * len(df)
+    for name in (c for c in ("eval_return", "frac_opt", "eval_success") if c in df):
+        empty = np.flatnonzero(df[name].isna().to_numpy())
+        if len(empty):
+            i = empty[0]
+            raise results.BadRows(f"its {name} column at row {rows[i] + 1} (step {steps[i]}) is empty; allowed: a "
+                                  "number (a maze's evaluation episodes always end)")
+    if {"eval_return", "frac_opt"} <= set(df):
+        optimum = _optimum(env)
+        ret, frac = (pd.to_numeric(df[c], errors="coerce").to_numpy(float) for c in ("eval_return", "frac_opt"))
+        wrong = np.flatnonzero(~np.isclose(frac * optimum, ret, rtol=1e-9, atol=1e-9))
+        if len(wrong):
+            i = wrong[0]
+            raise results.BadRows(f"its frac_opt column at row {rows[i] + 1} (step {steps[i]}) holds {float(frac[i])!r}; "
+                                  f"allowed: eval_return / the maze's optimum = {float(ret[i] / optimum)!r}")
 
 
 @functools.cache
@@ -250,13 +263,15 @@ class RunCount:
     failed: list[Failure] = field(default_factory=list)
 
 
-def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str = True,
+def run_all(budget: str, figures=None, workers: int = 2, progress: bool | str = True,
             executor: str = "local", address: str | None = None) -> RunCount:
     """Train every run of the given figures that is not on disk yet, on ``executor``: "local"
     (``workers`` processes of this machine) or "ray" (a Ray cluster at ``address``; None starts
     one on this machine). Whatever trains a run, this driver writes its CSV. A run that fails
     is reported (config and traceback) and the others go on; see ``RunCount.failed``.
-    ``progress``: True (a bar), "lines" (one line per run, for logs) or False."""
+    ``progress``: True (a bar), "lines" (one line per run, for logs) or False. ``figures``: None
+    for every figure (one without runs at ``budget`` has nothing to train), else figures that
+    have runs there (``required_runs``), or one figure's name."""
     from tqdm import tqdm
 
     from oapo_lite.study.runs import executors
@@ -266,7 +281,12 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     workers = cli_workers(workers, "workers")
     if progress != "lines" and not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"run_all's progress must be True, False or \"lines\", got {progress!r}")
-    figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
+    if figures is None:
+        figures = FIGURES
+    else:
+        figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
+        for figure in figures:
+            required_runs(figure, budget)
     todo, skipped = [], {}
     for run in grid_runs(budget, figures):
         missing_engine = _missing_engine(run.cfg)
@@ -327,7 +347,8 @@ def export_figure(figure, budget: str) -> Path | None:
 
 
 def missing_runs(figure: str, budget: str) -> list[Run]:
-    """The runs of ``figure`` at ``budget`` that are not on disk yet (or damaged)."""
+    """The runs of ``figure`` at ``budget`` that are not on disk yet (or damaged); none for a
+    figure without runs there (notebook 20 asks at every budget)."""
     return [r for r in runs_of(figure, budget) if not on_disk(r.cfg, budget)]
 
 
@@ -358,8 +379,11 @@ def versions(figure: str, budget: str) -> tuple:
 
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
-    with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""
-    skip_missing = boolean(skip_missing, "skip_missing")
+    with ``skip_missing``; otherwise a run not on disk raises naming it). A figure with no runs at
+    ``budget`` is refused, or with ``skip_missing`` read as empty (the tables that show what is on
+    disk at any budget). Reads only."""
+    if not boolean(skip_missing, "skip_missing"):
+        required_runs(figure, budget)
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
         try:

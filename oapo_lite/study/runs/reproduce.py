@@ -242,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:  # fail fast, naming what is allowed
         grid.get_budget(args.budget)
-        if args.figures is None:  # every figure: those without runs at the budget have nothing to do
+        every = args.figures is None
+        if every:  # every figure: those without runs at the budget have nothing to do
             args.figures = list(FIGURES)
         else:  # a figure named on purpose that has no runs at the budget would read as "nothing to do"
             for figure in args.figures:
@@ -272,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     signal.signal(signal.SIGTERM, cli.interrupt)  # a SIGTERM stops the work as Ctrl-C does
     try:
-        runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
+        runs = experiments.run_all(args.budget, figures=None if every else args.figures, workers=args.workers,
                                    progress="lines" if args.check else True, executor=args.executor,
                                    address=args.address)
     except KeyboardInterrupt:
