@@ -32,11 +32,13 @@ book-deps: .venv/book-installed
 book: book-deps
 	$(PY) -m oapo_lite book
 
-# Debian's Chromium and its driver, for the book's browser test (installed once; needs root or sudo).
+# Debian's Chromium and its driver, for the book's browser test (installed once; needs root or sudo),
+# quietly and without the packages apt merely recommends (as grf below).
 browser:
 	@command -v chromium > /dev/null && command -v chromedriver > /dev/null || { \
 	  SUDO=$$( [ "$$(id -u)" -eq 0 ] || echo sudo ); \
-	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium chromium-driver; }
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends \
+	    chromium chromium-driver > /dev/null; }
 
 # Google Research Football: system libraries, then psutil (gfootball's build imports it), then
 # its Python deps, then the engine itself (a ~7 min C++ compile; pip caches the built wheel).

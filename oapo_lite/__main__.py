@@ -1,15 +1,17 @@
-"""Command line: ``python -m oapo_lite train ...`` (one run), ``python -m oapo_lite reproduce ...``
-or ``python -m oapo_lite book`` (the notebooks as a static site).
+"""The command line of oapo-lite: train one run, reproduce a budget's runs and notebooks, or
+build the notebooks as a static site.
 
+examples:
     python -m oapo_lite train --algo oappo --env black_red --seed 0 --steps 200000 --sigma 0.1 --reuse-lambda 0.7 --out runs/
     python -m oapo_lite train --algo oappo --env smax:3m --n-envs 64 --max-steps 100 --steps 300000
+    python -m oapo_lite reproduce --budget student --plan
 
-Every ``TrainConfig`` field is a flag; the run goes to ``<out>/<algo>-<env>-s<seed>-<config hash>/``
+Every TrainConfig field is a flag of train; the run goes to <out>/<algo>-<env>-s<seed>-<config hash>/
 (the name the run cache uses), so runs that differ in any setting never share a folder.
 
 Errors in what you asked for (a bad value, a damaged checkpoint, a folder that cannot be
-written, a run that diverged) are one line on stderr, exit status 2. ``--debug`` (anywhere on
-the line) or ``OAPO_DEBUG=1`` shows the Python traceback instead.
+written, a run that diverged) are one line on stderr, exit status 2. --debug (anywhere on
+the line) or OAPO_DEBUG=1 shows the Python traceback instead.
 """
 from __future__ import annotations
 
@@ -109,7 +111,6 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
     steps that are not whole iterations: ``_refuse_partial_iteration``.)"""
     from oapo_lite.algorithms import ALGOS
     from oapo_lite.neural.config import readers
-    from oapo_lite.store import cannot_write
 
     for action in parser._actions:
         if cli.times_given(action, argv) and args["algo"] in ALGOS and args["algo"] not in readers(action.dest):
@@ -118,54 +119,46 @@ def _refuse_unhonoured(parser: argparse.ArgumentParser, argv: list[str], args: d
     board = args.get("tensorboard")
     if board is not None:
         try:
-            args["tensorboard"] = folder = str(cli.output_folder(board, "--tensorboard"))
+            args["tensorboard"] = str(cli.writable_folder(board, "--tensorboard"))
         except ValueError as err:
             parser.error(str(err))
-        why = cannot_write(Path(folder))
-        if why:
-            parser.error(f"--tensorboard {board!r} cannot be written ({why}); choose another folder")
 
 
 def _refuse_partial_iteration(parser: argparse.ArgumentParser, cfg) -> None:
     """The run trains ``steps // iteration_steps`` whole iterations: other steps would be
     recorded as asked but not trained."""
-    from oapo_lite.algorithms import ALGOS
-
     per = cfg.iteration_steps
     if cfg.steps % per:
         below, above = cfg.steps // per * per, (cfg.steps // per + 1) * per
-        length = "n_step" if ALGOS[cfg.algo].a2c else "rollout_len"
-        parser.error(f"--steps {cfg.steps} is not a whole number of iterations of n_envs x {length} = {per} env "
-                     f"steps; allowed: a multiple of {per}, e.g. {below or above} or {above}")
+        parser.error(f"--steps {cfg.steps} is not a whole number of iterations of n_envs x {cfg.rollout_field} = {per} "
+                     f"env steps; allowed: a multiple of {per}, e.g. {below or above} or {above}")
 
 
 def train_main(argv: list[str]) -> int:
+    parser = train_parser()
+    args = vars(parser.parse_args(argv))  # first: --help and a bad flag answer before the heavy imports
     import pandas as pd
 
     from oapo_lite.envs.maps import MAPS, parse_maze
     from oapo_lite.neural.config import TrainConfig
     from oapo_lite.neural.train import train
+    from oapo_lite.store import regular_file
 
-    parser = train_parser()
-    args = vars(parser.parse_args(argv))
     _refuse_unhonoured(parser, argv, args)
     out, resume, progress = cli.output_folder(args.pop("out"), "--out"), not args.pop("no_resume"), \
         not args.pop("no_progress")
     tensorboard = args.pop("tensorboard")
     name, file_name = args["env"], None
+    allowed = f"allowed: a built-in map {sorted(MAPS)}, a map file or <engine>:<name>"
     if not name.strip():
-        raise ValueError(f"--env {name!r} is empty; allowed: a built-in map {sorted(MAPS)}, a map file or "
-                         "<engine>:<name>")
-    if name not in MAPS and Path(name).is_dir():
-        raise ValueError(f"--env {name!r} is a folder; allowed: a built-in map {sorted(MAPS)}, a map file or "
-                         "<engine>:<name>")
-    if name not in MAPS and ":" not in name and ("/" in name or name.endswith(".txt")) and not Path(name).exists():
-        raise ValueError(f"--env {name!r}: no such map file; allowed: a built-in map {sorted(MAPS)}, a map file or "
-                         "<engine>:<name>")
-    if name not in MAPS and Path(name).is_file():
+        raise ValueError(f"--env {name!r} is empty; {allowed}")
+    if name not in MAPS and (os.path.lexists(name) or ":" not in name and ("/" in name or name.endswith(".txt"))):
         path = Path(name)
         try:
+            regular_file(path, "--env", allowed)  # a FIFO or a device is named, never opened
             args["env"] = path.read_text()
+        except FileNotFoundError:
+            raise ValueError(f"--env {name!r}: no such map file; {allowed}") from None
         except (OSError, UnicodeDecodeError) as err:
             raise ValueError(f"cannot read the map file {path}: {err}") from None
         parse_maze(args["env"], name=str(path))  # its errors name the file
@@ -206,6 +199,16 @@ def _book(argv: list[str]) -> int:
 
 
 COMMANDS = {"train": train_main, "reproduce": _reproduce, "book": _book}
+SUMMARIES = {"train": "train one run (python -m oapo_lite train --help: every flag)",
+             "reproduce": "train a budget's runs, then execute every notebook (--plan: what it would cost)",
+             "book": "the notebooks with their committed outputs as a static site"}
+
+
+def usage() -> str:
+    """``--help``: the usage line, the commands and what they do, then the module's words."""
+    commands = "\n".join(f"  {name:<11}{SUMMARIES[name]}" for name in COMMANDS)
+    return (f"usage: python -m oapo_lite {{{','.join(COMMANDS)}}} [--help] [FLAGS ...] [--debug]\n\ncommands:\n"
+            f"{commands}\n\n{__doc__.strip()}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -213,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     debug = cli.debug_requested(argv)
     argv = [a for a in argv if a != "--debug"]
     if argv and argv[0] in ("-h", "--help"):
-        print(__doc__.strip())
+        print(usage())
         return 0
     if not argv:
         print(f"error: no command given; the commands are {list(COMMANDS)} (python -m oapo_lite --help)",
@@ -224,8 +227,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     try:
-        with cli.uninterrupted():  # an interrupt during the import waits for its end
-            import torch  # noqa: F401
+        if not {"-h", "--help"} & set(argv[1:]):  # a command's help parses its flags, and needs no torch
+            with cli.uninterrupted():  # an interrupt during the import waits for its end
+                import torch  # noqa: F401
         return COMMANDS[argv[0]](argv[1:])
     except KeyboardInterrupt:
         print("interrupted; run the same command again to resume", file=sys.stderr)

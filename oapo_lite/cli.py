@@ -1,6 +1,8 @@
 """What every command line of the package shares: an error is one line naming the bad value or
 file and what to do, with exit status 2; a bug (any other exception) says how to see its
-traceback (``--debug`` or ``OAPO_DEBUG=1``), with exit status 1."""
+traceback (``--debug`` or ``OAPO_DEBUG=1``), with exit status 1. And the checks of values that
+the command lines, the library and the notebooks' parameters share (``boolean``, ``names``,
+``output_folder``), so that one value is refused alike wherever it enters."""
 from __future__ import annotations
 
 import argparse
@@ -9,8 +11,11 @@ import errno
 import os
 import re
 import signal
+import stat
 import sys
 from pathlib import Path
+
+import numpy as np
 
 
 class Parser(argparse.ArgumentParser):
@@ -47,25 +52,86 @@ def times_given(action: argparse.Action, args: list[str]) -> int:
     return sum(a == opt or a.startswith(opt + "=") for opt in action.option_strings for a in args)
 
 
+def boolean(value, what: str) -> bool:
+    """``value`` if it is True or False (numpy's too); anything else is refused, naming ``what``:
+    read as truthy, the string "no" or "false" would mean yes."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{what} must be True or False, got {value!r}")
+    return bool(value)
+
+
+# the most processes a command starts at once: beyond any machine's cores here, each holding a
+# run (hundreds of MB); a larger count is a slip of the keyboard (10^23 was priced as workers)
+MAX_WORKERS = 1024
+
+
+def workers(value, what: str) -> int:
+    """A count of worker processes: an integer in [1, ``MAX_WORKERS``], else refused naming ``what``."""
+    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) or not 1 <= value <= MAX_WORKERS:
+        raise ValueError(f"{what} = {value!r} is invalid; allowed: an integer in [1, {MAX_WORKERS}]")
+    return int(value)
+
+
+def names(value, what: str) -> tuple:
+    """A sequence of names as a tuple; one name given as a string is refused, not split into letters."""
+    if isinstance(value, str):
+        raise TypeError(f"{what} must be a sequence of names, got the string {value!r}; write ({value!r},)")
+    try:
+        return tuple(value)
+    except TypeError:
+        raise TypeError(f"{what} must be a sequence of names, got {type(value).__name__} {value!r}") from None
+
+
 def output_folder(text: str, what: str) -> Path:
     """An output folder given on the command line or in the environment (``what`` names where),
     resolved to an absolute path once, at the start of a command, so that every process and
     notebook it starts writes to the same place; an empty path (which would name the working
-    folder), the filesystem root, a file and a link to a missing folder are refused."""
+    folder), the filesystem root, a file and a link to a missing folder are refused, and a path
+    the system cannot follow is named by its cause (no such user, a loop of links, a name too
+    long: ``store.cause``)."""
+    from oapo_lite.store import KINDS, cause
+
     if not isinstance(text, str) or not text.strip():
         raise ValueError(f"{what} {text!r} is empty; allowed: a folder path (. for the working folder)")
-    path = Path(text).expanduser()
-    if path.is_symlink() and not path.exists():
-        raise ValueError(f"{what} {text!r} is a link to {os.readlink(path)!r}, which does not exist; allowed: a folder "
-                         "or a link to one")
+    try:
+        path = Path(text).expanduser()
+    except RuntimeError:  # pathlib's words for a ~user that does not exist, or ~ without a HOME
+        user = text[1:].split("/", 1)[0]
+        raise ValueError(f"{what} {text!r} starts with ~{user}, but " + (f"there is no user {user!r}" if user else
+                         "HOME is not set") + "; allowed: a folder path") from None
+    try:
+        status = os.stat(path)
+    except FileNotFoundError:  # a new folder, or a link to one that does not exist
+        status = None
+        if path.is_symlink():
+            raise ValueError(f"{what} {text!r} is a link to {os.readlink(path)!r}, which does not exist; allowed: a "
+                             "folder or a link to one") from None
+    except NotADirectoryError:  # a file on the way: named below
+        status = None
+    except OSError as err:
+        shown = repr(text) if len(text) <= 80 else f"{text[:40]!r}... ({len(text)} characters)"
+        raise ValueError(f"{what} {shown} cannot be used: {cause(err)}; allowed: a folder path") from None
     path = path.resolve()
     if path == path.parent:
         raise ValueError(f"{what} {text!r} is the filesystem root; allowed: a folder below it")
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"{what} {text!r} is a file; allowed: a folder")
+    if status is not None and not stat.S_ISDIR(status.st_mode):
+        kind = next((name for test, name in KINDS if test(status.st_mode)), "a file")
+        raise ValueError(f"{what} {text!r} is {kind}; allowed: a folder")
     above = next(p for p in path.parents if p.exists())
     if not above.is_dir():
         raise ValueError(f"{what} {text!r} lies below {str(above)!r}, which is a file; allowed: a folder")
+    return path
+
+
+def writable_folder(text: str, what: str) -> Path:
+    """``output_folder``, made and checked writable now (``store.cannot_write``): a command, or
+    ``train``, refuses it at its start rather than where it first writes."""
+    from oapo_lite.store import cannot_write
+
+    path = output_folder(text, what)
+    why = cannot_write(path)
+    if why:
+        raise ValueError(f"{what} {text!r} cannot be written ({why}); choose another folder")
     return path
 
 

@@ -12,6 +12,7 @@ import json
 import os
 import shutil
 import socket
+import stat
 from pathlib import Path
 from typing import Callable
 
@@ -23,6 +24,60 @@ _HOST = socket.gethostname().replace("-", "_")
 
 class DamagedFile(ValueError):
     """A result or checkpoint file that cannot be read back; the message names it and what to do."""
+
+
+class NotAFile(ValueError):
+    """A path read as a file that names a folder, a FIFO, a socket or a device: refused by its
+    kind, never opened (reading a FIFO waits for a writer that never comes, and a device such as
+    /dev/zero never ends)."""
+
+
+# what a path names besides a regular file (os.stat follows links, so a link names its target)
+KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"),
+         (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
+
+
+def regular_file(path: Path, what: str, fix: str = "delete or move it") -> os.stat_result:
+    """The status of ``path`` if it names a regular file (or a link to one), checked before anything
+    opens it: ``FileNotFoundError`` if nothing is there, ``NotAFile`` naming what it is instead
+    (``what`` names the file's role, ``fix`` what to do), and a path the system cannot follow
+    (a loop of links, a name too long) as ``NotAFile`` naming that cause (``cause``)."""
+    try:
+        status = os.stat(path)
+    except FileNotFoundError:
+        raise
+    except OSError as err:
+        raise NotAFile(f"{what} {path} cannot be read: {cause(err)}; {fix}") from None
+    if not stat.S_ISREG(status.st_mode):
+        kind = next((name for test, name in KINDS if test(status.st_mode)), "not a regular file")
+        raise NotAFile(f"{what} {path} is {kind}, not a file; {fix}")
+    return status
+
+
+def is_file(path: Path, what: str, fix: str = "delete or move it") -> bool:
+    """Whether a regular file is at ``path`` (False: nothing there); ``regular_file``'s errors otherwise."""
+    try:
+        regular_file(path, what, fix)
+    except FileNotFoundError:
+        return False
+    return True
+
+
+# the causes the system gives for a path it cannot follow, in words that say what to change
+CAUSES = {
+    errno.ENOENT: "no such file or folder",
+    errno.ELOOP: "it runs through a loop of symbolic links (a link that points, at last, back to itself)",
+    errno.ENAMETOOLONG: "a name in it is longer than the file system allows (255 bytes a name, 4096 a path)",
+    errno.ENOTDIR: "a part of it before the last is a file, not a folder",
+    errno.EACCES: "permission denied",
+    errno.EROFS: "the file system is read-only",
+    errno.ENOSPC: "no space left on the device",
+}
+
+
+def cause(err: OSError) -> str:
+    """Why the system refused a path, in words (``CAUSES``), else its own."""
+    return CAUSES.get(err.errno, err.strerror or str(err))
 
 
 def _tmp_name(path: Path, pid: int) -> Path:
@@ -79,7 +134,7 @@ def cannot_write(folder: Path) -> str | None:
         probe.touch()
         probe.unlink()
     except OSError as err:
-        return err.strerror or str(err)
+        return cause(err)
     return None
 
 
@@ -122,11 +177,9 @@ class Lock:
         self.path, self._fd = Path(path), None
 
     def acquire(self, wait: bool = True) -> bool:
-        try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        except IsADirectoryError:
-            raise ValueError(f"the lock file {self.path} is a folder; delete it (a lock holds nothing: it keeps two "
-                             "processes from writing one run at once)") from None
+        is_file(self.path, "the lock file", "delete it (a lock holds nothing: it keeps two processes from writing one "
+                                            "run at once)")
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:

@@ -17,9 +17,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 NUMERIC = {"test_adaptive", "test_assumptions", "test_claims", "test_divergence", "test_envs", "test_exact", "test_gate_study",
            "test_layout_study", "test_losses", "test_mamujoco", "test_normalize", "test_reuse", "test_rollout", "test_seac_seps",
            "test_smax", "test_statistics", "test_tabular", "test_train", "test_trpo", "test_verdicts"}
-NOT_NUMERIC = {"test_bad_input_and_damage", "test_book", "test_checkpoint_data", "test_costs", "test_experiments",
-               "test_grf", "test_interactive", "test_layers", "test_layouts", "test_maps", "test_notebooks", "test_plotting",
-               "test_protocols", "test_render", "test_ray_executor", "test_reproduce", "test_selection"}
+NOT_NUMERIC = {"test_bad_cli", "test_bad_maps", "test_bad_runs", "test_bad_study_input", "test_book",
+               "test_checkpoint_data", "test_costs", "test_experiments", "test_grf", "test_interactive",
+               "test_layers", "test_layouts", "test_maps", "test_notebooks", "test_plotting", "test_protocols",
+               "test_ray_executor", "test_render", "test_reproduce", "test_selection"}
 
 
 def pytest_collection_modifyitems(config, items):

@@ -62,6 +62,12 @@ def _quiet_c_stderr():
         os.close(saved)
 
 
+def _warn(message: str) -> None:
+    """MuJoCo's warnings, on stderr: its own handler also appends them to MUJOCO_LOG.TXT in the
+    working folder, wherever a run or a notebook is started (a file in the user's checkout)."""
+    print(f"MuJoCo warning: {message}", file=sys.stderr, flush=True)
+
+
 def env_fn(name: str, max_steps: int):
     """A factory of one MaMuJoCo ``ParallelEnv`` whose own time limit is ``max_steps``."""
     check(name)
@@ -71,6 +77,10 @@ def env_fn(name: str, max_steps: int):
     except ImportError as err:
         raise ImportError(f"mamujoco:{name} needs gymnasium-robotics and mujoco; install the pins "
                           f"of environment.txt (pip install -r environment.txt): {err}") from None
+    import mujoco
+
+    if mujoco.get_mju_user_warning() is None:  # a handler set by the user is theirs
+        mujoco.set_mju_user_warning(_warn)
     robot, partition = name.split("-")
     partition = None if partition.startswith("1x") else partition  # the engine's one-agent configuration
 

@@ -157,8 +157,9 @@ class Maze:
 def parse_maze(text: str, name: str = "custom") -> Maze:
     """Parse and validate a map text (see the module docstring for the format)."""
     header: dict[str, list[str]] = {}
+    given: dict[str, list[int]] = {}  # the line numbers of each header key
     grid: list[str] = []
-    for raw in text.removeprefix("\ufeff").splitlines():  # an editor's byte-order mark is no cell
+    for number, raw in enumerate(text.removeprefix("\ufeff").splitlines(), 1):  # a byte-order mark is no cell
         line = raw.rstrip()
         if not line:
             continue
@@ -168,8 +169,14 @@ def parse_maze(text: str, name: str = "custom") -> Maze:
                 raise MapError(f"map {name!r} has its {key.strip()!r} line after the grid; the header lines "
                                "'agents: ...' and 'start: ...' come first")
             header[key.strip()] = value.split()
+            given.setdefault(key.strip(), []).append(number)
         else:
             grid.append(line)
+    twice = {key: lines for key, lines in given.items() if len(lines) > 1}
+    if twice:  # a second line would silently replace the first
+        key, lines = next(iter(twice.items()))
+        raise MapError(f"map {name!r} gives its {key!r} line {len(lines)} times (lines {lines}); give each header "
+                       "line once")
     if not grid:
         raise MapError(f"map {name!r} has no grid rows")
     widths = {len(r) for r in grid}

@@ -193,8 +193,13 @@ class TrainConfig:
         maze = env_registry.maze_of(self.env) if self.env_fn is None else None
         if maze is not None:
             check_fits(maze, self.max_steps)
-        need(self.steps >= self.iteration_steps, "steps", f">= n_envs * rollout_len = {self.iteration_steps} (one iteration)")
+        need(self.steps >= self.iteration_steps, "steps",
+             f">= n_envs * {self.rollout_field} = {self.iteration_steps} (one iteration)")
         need(self.n_minibatch <= self.n_envs * self.rollout_len, "n_minibatch")
+        if not ALGOS[self.algo].a2c and self.iteration_steps < 2:  # one sample has no spread to normalise by
+            raise ValueError(f"n_envs = {self.n_envs} and rollout_len = {self.rollout_len} give one sample per "
+                             "iteration; allowed: n_envs * rollout_len >= 2 (the advantages are normalised by "
+                             "their standard deviation over the iteration's samples)")
         for name in ("gamma", "gae_lambda", "reuse_lambda"):
             real(name, lambda x: 0.0 <= x <= 1.0)
         for name in ("lr", "critic_lr", "clip", "max_grad_norm", "kl_threshold", "a2c_lr", "a2c_adam_eps",
@@ -260,7 +265,12 @@ class TrainConfig:
     @property
     def rollout_steps(self) -> int:
         """Steps of every env copy per iteration: ``n_step`` for SEAC / SePS, else ``rollout_len``."""
-        return self.n_step if ALGOS[self.algo].a2c else self.rollout_len
+        return getattr(self, self.rollout_field)
+
+    @property
+    def rollout_field(self) -> str:
+        """The field that sets ``rollout_steps``: what a message about the rollout's length names."""
+        return "n_step" if ALGOS[self.algo].a2c else "rollout_len"
 
     @property
     def networks_used(self) -> str:

@@ -41,6 +41,7 @@ class Column:
     shape: str = "number"  # "number", "matrix" (n x n), "vector" (n entries) or "text"
     infinite: bool = False  # +inf allowed (a KL against a policy that gives an action no probability)
     rows_sum_to_one: bool = False
+    cumulative: bool = False  # a sum so far: never below its value at an earlier step of the run
 
 
 FIRST = "at the evaluation before the first iteration"
@@ -84,8 +85,8 @@ COLUMNS = {
                     integer=True, shape="vector"),
     "agent_types": Column("each seat's agent type, as a JSON list", shape="text"),
     "cpu_s": Column("CPU seconds the run has cost so far (every thread; an engine's worker processes)", 0,
-                    empty=UNMEASURED),
-    "wall_s": Column("wall seconds the run has taken so far", 0, empty=UNMEASURED),
+                    empty=UNMEASURED, cumulative=True),
+    "wall_s": Column("wall seconds the run has taken so far", 0, empty=UNMEASURED, cumulative=True),
     "cpu_model": Column("the CPU the cost was measured on", empty=UNMEASURED, shape="text"),
     "cpu_count": Column("its logical cores", 1, integer=True, empty=UNMEASURED),
 }
@@ -124,8 +125,9 @@ def _allowed(c: Column) -> str:
 
 
 def check(df: pd.DataFrame, config_columns) -> None:
-    """Raise ``BadRows`` naming the first cell of ``df`` (matrices already arrays) that breaks its
-    column's declaration, or a column that is neither declared nor one of ``config_columns``."""
+    """Raise ``BadRows`` naming the first cell of one run's rows ``df`` (matrices already arrays)
+    that breaks its column's declaration (``check_values``), or a column that is neither declared
+    nor one of ``config_columns``."""
     unknown = [c for c in df.columns if c not in COLUMNS and c not in RETIRED and c not in config_columns
                and c != "git_rev"]
     if unknown:
@@ -133,15 +135,29 @@ def check(df: pd.DataFrame, config_columns) -> None:
     kept = [c for c in RETIRED if c in df and df[c].notna().any()]
     if kept:
         raise BadRows(f"its retired {kept[0]} column holds values; allowed: empty")
+    check_values(df)
+
+
+def check_values(df: pd.DataFrame, runs=()) -> None:
+    """Raise ``BadRows`` naming the first cell of ``df`` that breaks its declared column's type,
+    range or emptiness (the columns ``COLUMNS`` does not declare are left alone), or where a
+    cumulative column falls below its value at an earlier step of the same run. ``runs``: the
+    columns that tell the runs of ``df`` apart; none: ``df`` is one run, else its runs were put
+    together, where a column one run lacks is empty in the others' rows, so emptiness is not
+    checked. The run files are read through it (``check``), and so is a frame of runs handed over
+    in memory (``verdicts.judge``)."""
     steps = df["step"].tolist() if "step" in df else [None] * len(df)
     first = (df["iteration"] == 0).to_numpy() if "iteration" in df else np.zeros(len(df), bool)
-    sizes = set()
+    run_of = list(zip(*(df[k].astype(str) for k in runs))) if runs else [()] * len(df)
+    sizes: dict[tuple, set] = {}  # per run, the seats its matrices and vectors have
     for name, c in COLUMNS.items():
         if name not in df:
             continue
         column = df[name]
         empty = column.isna().to_numpy()
-        wrong = empty & ~(first if c.empty == FIRST else np.ones(len(df), bool) if c.empty else np.zeros(len(df), bool))
+        allowed_empty = (np.ones(len(df), bool) if runs or (c.empty and c.empty != FIRST) else
+                         first if c.empty == FIRST else np.zeros(len(df), bool))
+        wrong = empty & ~allowed_empty
         if c.shape == "number":
             x = pd.to_numeric(column, errors="coerce").to_numpy(float)
             with np.errstate(invalid="ignore"):
@@ -149,11 +165,36 @@ def check(df: pd.DataFrame, config_columns) -> None:
                                    | (c.integer & (x != np.round(x))) | (column.map(type) == bool).to_numpy())
         else:
             for i in np.flatnonzero(~empty):
-                wrong[i] = not _fits(column.iloc[i], c, sizes)
+                wrong[i] = not _fits(column.iloc[i], c, sizes.setdefault(run_of[i], set()))
+                if wrong[i]:
+                    break
         if wrong.any():
             i = int(np.flatnonzero(wrong)[0])
-            allowed = _allowed(c) if len(sizes) < 2 else f"the same number of seats in every matrix ({sorted(sizes)} here)"
+            seats = sizes.get(run_of[i], set())
+            allowed = (_allowed(c) if len(seats) < 2 else
+                       f"the same number of seats in every matrix ({sorted(seats)} here)")
             raise _fail(name, i, steps[i], column.iloc[i], allowed)
+        if c.cumulative:
+            i, before = _falls(df, name, list(runs))
+            if i is not None:
+                raise _fail(name, i, steps[i], column.iloc[i],
+                            f"a number >= {before!r}, its value at an earlier step of the run (it sums the run so far)")
+
+
+def _falls(df: pd.DataFrame, name: str, runs: list[str]) -> tuple[int | None, float | None]:
+    """The position of the first row where the cumulative column ``name`` is below the largest
+    value of its run at an earlier step, and that value; (None, None) where it never falls."""
+    frame = pd.DataFrame({"x": pd.to_numeric(df[name], errors="coerce").to_numpy(float), "at": np.arange(len(df)),
+                          "step": df["step"].to_numpy() if "step" in df else np.arange(len(df)),
+                          **{f"run {k}": df[k].astype(str).to_numpy() for k in runs}})
+    keys = [f"run {k}" for k in runs] or (lambda _: 0)
+    frame = frame.sort_values([*(f"run {k}" for k in runs), "step"], kind="stable")
+    before = frame.groupby(keys)["x"].transform(lambda x: x.cummax().shift())
+    fell = (frame["x"] < before).to_numpy()  # NaN (unmeasured) never falls
+    if not fell.any():
+        return None, None
+    first = frame[fell].sort_values("at").iloc[0]
+    return int(first["at"]), float(before[first.name])
 
 
 def _fits(value, c: Column, sizes: set) -> bool:

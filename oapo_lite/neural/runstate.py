@@ -32,7 +32,7 @@ from oapo_lite.neural.normalize import Moments, Normalized
 from oapo_lite.neural.ppo_family import PPOFamilyLearner
 from oapo_lite.neural.rollout import make_env
 from oapo_lite.neural.seps import group_labels
-from oapo_lite.store import DamagedFile, atomic_write, write_frame
+from oapo_lite.store import DamagedFile, atomic_write, regular_file, write_frame
 
 START_AFRESH = "start afresh (resume=False; on the command line --no-resume) or use another output folder"
 # the keys under which a checkpoint before the layer folders kept its learner's state: the PPO family's at the top
@@ -182,6 +182,7 @@ def read_data(path: Path) -> object:
     """What ``torch.save`` wrote to ``path``, built by torch's restricted unpickler from data
     alone (``ALLOWED``); ``store.DamagedFile`` naming the file, and the types it refused if it
     holds others: nothing in such a file is run."""
+    regular_file(path, "checkpoint")  # a FIFO would block torch.load, and the rerun it advised, forever
     try:
         with torch.serialization.safe_globals(ALLOWED):
             return torch.load(path, weights_only=True)
@@ -254,7 +255,34 @@ def _inconsistent(ck: dict) -> str | None:
     seen = [r["iteration"] for r in rows]
     if seen[0] != 0 or any(b <= a for a, b in zip(seen, seen[1:])) or seen[-1] > it:
         return f"its evaluation rows are at iterations {seen}, not from 0 upwards to at most {it}"
+    for key in ("cpu_s", "wall_s") if ck.get("cost") is not None else ():  # the run's sums go on from its cost
+        last = rows[-1].get(key)
+        if isinstance(last, float) and last > ck["cost"][key]:
+            return f"its cost {key} = {ck['cost'][key]!r} is below its last row's {last!r}; a sum so far never falls"
     return None
+
+
+def nonfinite(ck: dict, keys) -> list[str]:
+    """The entries below ``keys`` of checkpoint ``ck`` (nets, optimisers) that hold a NaN or an
+    infinity, as paths such as ``actors/net0.body.0.weight``."""
+    found = []
+
+    def walk(value, at: str) -> None:
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(v, f"{at}/{k}")
+        elif isinstance(value, (list, tuple)):
+            for k, v in enumerate(value):
+                walk(v, f"{at}/{k}")
+        elif isinstance(value, torch.Tensor) and value.is_floating_point():
+            if not torch.isfinite(value).all():
+                found.append(at)
+        elif isinstance(value, np.ndarray) and value.dtype.kind == "f" and not np.isfinite(value).all():
+            found.append(at)
+
+    for key in keys:
+        walk(ck.get(key), key)
+    return found
 
 
 def learner_state_before(ck: dict) -> dict:

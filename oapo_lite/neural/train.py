@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from oapo_lite.cli import boolean, writable_folder
 from oapo_lite.neural.board import Board
 from oapo_lite.neural.config import TrainConfig, derive_seed
 from oapo_lite.neural.cost import Meter, clocks, machine
@@ -30,7 +31,7 @@ from oapo_lite.neural.learner import WANTS, Observer
 from oapo_lite.neural.losses import Diverged
 from oapo_lite.neural.results import stored
 from oapo_lite.neural.rollout import collect, episode_scores
-from oapo_lite.neural.runstate import RunState, git_revision, load_checkpoint, save_results
+from oapo_lite.neural.runstate import RunState, git_revision, load_checkpoint, nonfinite, save_results
 from oapo_lite.store import Lock
 
 
@@ -58,12 +59,14 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
                         f"{type(out_dir).__name__} {out_dir!r}")
     if tensorboard is not None and (not isinstance(tensorboard, (str, os.PathLike)) or not str(tensorboard).strip()):
         raise TypeError(f"train's tensorboard must be None or a folder path, got {tensorboard!r}")
+    if tensorboard is not None:  # checked before the run starts, not where the first scalar is written
+        tensorboard = writable_folder(str(tensorboard), "train's tensorboard")
+    if callback is not None and not callable(callback):
+        raise TypeError(f"train's callback must be None or callable with an iteration's metrics, got {callback!r}")
     if observer is not None and not (callable(observer) and set(getattr(observer, "wants", ())) <= WANTS.keys()):
         raise TypeError(f"train's observer must be callable with a wants set within {sorted(WANTS)}, got "
                         f"{observer!r}")
-    for name, value in (("resume", resume), ("progress", progress)):
-        if not isinstance(value, (bool, np.bool_)):
-            raise TypeError(f"train's {name} must be True or False, got {value!r}")
+    resume, progress = boolean(resume, "train's resume"), boolean(progress, "train's progress")
     out = Path(out_dir)
     start = clocks()  # building the envs (a JAX compile, GRF's engines) is part of the run's cost
     threads = torch.get_num_threads()
@@ -201,7 +204,13 @@ def _diverged_at(err: Diverged, state: RunState, out: Path) -> Diverged:
     if isinstance(net, (int, np.integer)):
         net = f"{net} (seats {[agents[k] for k in range(len(owner)) if owner[k] == net]})"
     path = out / "checkpoint.pt"
-    last = (f"the last good checkpoint {path} (iteration {load_checkpoint(out)['iteration']}) is left as it was"
-            if path.exists() else "no checkpoint had been written yet")
+    if path.exists():
+        ck = load_checkpoint(out)
+        bad = nonfinite(ck, ("actors", "learner"))
+        last = (f"the last checkpoint {path} (iteration {ck['iteration']}) is left as it was" + (
+            f", but it already holds non-finite values ({', '.join(bad[:3])}), so resuming from it diverges again; "
+            "start afresh (--no-resume) with other settings" if bad else ""))
+    else:
+        last = "no checkpoint had been written yet"
     return Diverged(err.quantity, net, f"iteration {state.iteration + 1} of {state.cfg.algo} seed {state.cfg.seed}: ",
                     f"; the run stopped and {last}")

@@ -126,3 +126,20 @@ def test_resuming_after_a_crash_gives_the_uninterrupted_numbers(tmp_path):
 def test_reuse_on_a_heterogeneous_partition_raises_clearly(tmp_path):
     with pytest.raises(ValueError, match="needs equal spaces"):
         train(TrainConfig(algo="oappo", steps=40, **{**TINY, "env": "mamujoco:Hopper-3x1"}), tmp_path, progress=False)
+
+
+def test_the_engine_writes_no_log_into_the_working_folder(tmp_path):
+    """MuJoCo appends its warnings to MUJOCO_LOG.TXT in the working folder (HalfCheetah's model
+    warns at every compile): made through the package, the env leaves the folder empty; made
+    directly, the same compile writes the file (what the first check would miss)."""
+    import subprocess
+    import sys
+
+    ours, direct = tmp_path / "ours", tmp_path / "direct"
+    for folder, code in ((ours, "from oapo_lite.envs import mamujoco; mamujoco.env_fn('HalfCheetah-2x3', 50)()"),
+                         (direct, "from gymnasium_robotics import mamujoco_v1; "
+                                  "mamujoco_v1.parallel_env('HalfCheetah', '2x3', max_episode_steps=50)")):
+        folder.mkdir()
+        done = subprocess.run([sys.executable, "-c", code], cwd=folder, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+    assert list(ours.iterdir()) == [] and [p.name for p in direct.iterdir()] == ["MUJOCO_LOG.TXT"]

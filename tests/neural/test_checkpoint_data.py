@@ -102,7 +102,7 @@ def test_the_command_line_refuses_it_in_one_line_and_reproduce_trains_the_run_ag
     assert not marker.exists()
     # reproduce's way: named on stderr, then trained again from the start, to the same rows
     cfg = TrainConfig(algo="oappo", env="black_red", n_envs=8, rollout_len=25, steps=400, eval_episodes=4)
-    rows, error = train_job(cfg, str(run))
+    rows, error, _ = train_job(cfg, str(run))
     assert error is None and not marker.exists()
     assert f"holds ['{SYSTEM}']" in capfd.readouterr().err
     assert len(rows) == len(first)

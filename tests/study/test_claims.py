@@ -53,7 +53,7 @@ def test_glance_names_the_runs_it_is_missing(tmp_path, monkeypatch):
     with pytest.raises(FileNotFoundError, match=rf"run\(s\) of {first.id} at budget 'cpu' are not on disk .*reproduce"):
         verdicts.glance()
     engine = next(f for f in figures.GRID if f.claims and f.runs_at is not None and "paper20" not in f.runs_at)
-    with pytest.raises(ValueError, match=rf"{engine.id} has no runs at budget 'paper20'"):
+    with pytest.raises(ValueError, match=rf"figure '{engine.id}' has no runs at budget 'paper20'"):
         verdicts.at_budget(engine, "paper20", required=True)
 
 

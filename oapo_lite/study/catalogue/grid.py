@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields, replace
 
 from oapo_lite.algorithms import ALGOS
-from oapo_lite.neural.a2c_family import beside_ppo
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.study.catalogue.metrics import FRAC_OPT, Metric
 
@@ -49,8 +48,11 @@ ENGINE_BUDGETS = ("smoke", "cpu", "paper")  # where a real engine's figure has r
 
 
 def get_budget(name: str, where: str = "") -> Budget:
-    if name not in BUDGETS:
-        raise ValueError(f"{where}unknown budget {name!r}; choose from {sorted(BUDGETS)}")
+    """The budget called ``name``; a name that names none, or a value that is no name (a list
+    from papermill's ``-y "budget: [smoke]"``), is refused naming the budgets."""
+    if not isinstance(name, str) or name not in BUDGETS:
+        kind = "" if isinstance(name, str) else f" (a {type(name).__name__}, where a budget is one name)"
+        raise ValueError(f"{where}unknown budget {name!r}{kind}; choose from {sorted(BUDGETS)}")
     return BUDGETS[name]
 
 
@@ -156,6 +158,8 @@ class Run:
 def _config(b: Budget, **kw) -> TrainConfig:
     """A run's config at budget ``b``; A2C runs take the shape that evaluates them at the PPO
     family's env steps (``a2c_family.beside_ppo``)."""
+    from oapo_lite.neural.a2c_family import beside_ppo  # imports torch: not for the catalogue's names (--help)
+
     kw, budget = {**b.config, **kw}, dict(steps=b.steps, eval_every=b.eval_every, eval_episodes=b.eval_episodes)
     if budget.keys() & kw.keys():
         raise ValueError(f"a curve or budget config sets {sorted(budget.keys() & kw.keys())}, which the budget decides")

@@ -11,8 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from oapo_lite.cli import boolean, names
+from oapo_lite.neural import results
 from oapo_lite.study.catalogue import grid
-from oapo_lite.study.catalogue.figures import GRID, get_figure
+from oapo_lite.study.catalogue.figures import GRID, get_figure, required_runs
 from oapo_lite.study.catalogue.grid import Figure
 from oapo_lite.study.catalogue.tests import FINAL_TIE, Claim
 from oapo_lite.study.judge.evidence import EQ9_ALGOS, LEARN_SE, LEARNED, REUSE_PART, Evidence, not_learned
@@ -240,10 +242,19 @@ def check(ev: Evidence | None, claim: Claim, figure: Figure | None = None) -> Ve
 
 def judge(figure, df: pd.DataFrame) -> list[Verdict]:
     """Every claim of ``figure`` (a ``grid.Figure`` or its id) checked against that figure's runs
-    ``df``, measured by its metric: a claim about one env on that env's runs alone."""
+    ``df``, measured by its metric: a claim about one env on that env's runs alone. Every value of
+    ``df`` in a column a run writes is checked as the run files are when read (``results.check_values``):
+    a frame changed in memory is refused, not judged."""
     fig = get_figure(figure)
     if not fig.claims:
         raise ValueError(f"no claims recorded for figure {fig.id!r}; choose from {sorted(f.id for f in GRID if f.claims)}")
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
+    try:
+        results.check_values(df, [c for c in ("env", "label", "seed") if c in df])
+        experiments.check_levels(df)
+    except results.BadRows as err:
+        raise ValueError(f"the runs of {fig.id} given to judge are not what runs write: {err}") from None
     evidence = {}
 
     def of(env):
@@ -256,19 +267,21 @@ def judge(figure, df: pd.DataFrame) -> list[Verdict]:
 
 
 def on_disk(figure: str, budget: str) -> bool:
-    """Every run of ``figure`` at ``budget`` has finished and been written."""
-    return all(experiments.on_disk(r.cfg, budget) for r in get_figure(figure).runs(budget))
+    """``figure`` has runs at ``budget``, and every one has finished and been written."""
+    runs = get_figure(figure).runs(budget)
+    return bool(runs) and all(experiments.on_disk(r.cfg, budget) for r in runs)
 
 
 def at_budget(fig: Figure, budget: str, required: bool) -> tuple[list[Verdict], dict] | None:
     """The claims' verdicts of ``fig`` at ``budget``, and per env (None for a figure judged whole)
     the fewest seeds of a curve on disk; None where its runs are not all on disk and the budget is
     not ``required`` (a ``required`` budget then raises, naming what is missing)."""
-    if fig.runs_at is not None and budget not in fig.runs_at:
+    required = boolean(required, "at_budget's required")
+    if not fig.runs(budget):
         if required:
-            raise ValueError(f"{fig.id} has no runs at budget {budget!r}; it runs at {list(fig.runs_at)}")
+            required_runs(fig, budget)  # raises, naming the budgets it has runs at
         return None
-    if fig.runs_at is None and not on_disk(fig.id, budget):
+    if fig.runs_at is None and not on_disk(fig.id, budget):  # an engine figure is judged on the runs it has
         if not required:
             return None
         missing = experiments.missing_runs(fig.id, budget)
@@ -308,7 +321,8 @@ def glance(budgets: tuple[str, str] = ("cpu", "paper20")) -> list[Judged]:
     """Every claim of the paper's experiments judged at ``budgets[1]`` where its runs are all there
     (20 seeds on the mazes), else at ``budgets[0]``, which must have them (it raises naming what is
     missing). Nothing is trained."""
-    if isinstance(budgets, str) or len(budgets) != 2:
+    budgets = names(budgets, "budgets")
+    if len(budgets) != 2:
         raise ValueError(f"budgets must be two budget names, got {budgets!r}")
     for b in budgets:
         grid.get_budget(b)

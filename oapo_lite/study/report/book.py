@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import ast
 import errno
+import importlib.util
+import re
 import shutil
 import subprocess
 import sys
@@ -85,6 +87,20 @@ def index_page(rows: list[tuple[str, str, str]], paths: list[Path]) -> str:
     return "\n".join(lines + ["```", ""])
 
 
+# the book's packages (book-requirements.txt, which pins them) by the module each is imported as
+PACKAGES = {"sphinx": "Sphinx", "myst_nb": "myst-nb", "sphinx_book_theme": "sphinx-book-theme",
+            "mathjax": "django-static-mathjax"}
+
+
+def check_packages() -> None:
+    """Refuse to start without the book's packages, naming them and the step that installs them
+    (an import error alone names a module, e.g. 'mathjax', that no package is called)."""
+    missing = [package for module, package in PACKAGES.items() if importlib.util.find_spec(module) is None]
+    if missing:
+        raise ImportError(f"the book needs {missing}, which are not installed; run `make book-deps` (or "
+                          "pip install -r book-requirements.txt)")
+
+
 def mathjax_dir() -> Path:
     """MathJax 3's browser files, from the ``django-static-mathjax`` wheel (book-requirements.txt)."""
     import mathjax
@@ -109,7 +125,30 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     if src.exists() and not (src / SOURCES_MARK).exists():  # never delete what the book did not write
         raise ValueError(f"{src} exists and was not written by the book (it writes its sources there); move it or "
                          "choose another --out")
+    check_packages()  # after the folders: a bad --out is named whatever is installed
     shutil.rmtree(src, ignore_errors=True)
+    try:
+        _write_sources(src, notebooks)
+    except OSError as err:  # a copy's error names the notebook it copied: the device that is full is out's
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise OSError(err.errno, err.strerror, str(out)) from None
+        raise
+    cmd = [sys.executable, "-m", "sphinx", "-b", "html", "-E", *(["-q"] if quiet else []), str(src), str(out)]
+    done = subprocess.run(cmd, stderr=subprocess.PIPE, text=True)
+    if done.returncode:  # one line, not Sphinx's crash report (it keeps the report in a file it names)
+        saved = re.search(r"saved in (\S+?)\.?$", done.stderr, re.M)
+        where = f"; Sphinx's report: {saved.group(1)}" if saved else ""
+        if "No space left on device" in done.stderr:
+            raise OSError(errno.ENOSPC, f"Sphinx could not write the book{where}", str(out))
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise ValueError(f"Sphinx failed to build the book into {out} (exit status {done.returncode}): {last}{where}")
+    sys.stderr.write(done.stderr)  # its warnings
+    return out / "index.html"
+
+
+def _write_sources(src: Path, notebooks: Path) -> None:
+    """The Sphinx sources of the book in ``src``: the notebooks, the glossary, the front page,
+    the configuration and the static files."""
     (src / "notebooks").mkdir(parents=True)
     (src / SOURCES_MARK).write_text("the book's Sphinx sources, rewritten at every build\n")
     paths = notebook_paths() if notebooks == NOTEBOOKS else sorted(Path(notebooks).glob("[0-9]*.ipynb"))
@@ -120,15 +159,6 @@ def build(out: Path, notebooks: Path = NOTEBOOKS, quiet: bool = True) -> Path:
     (src / "index.md").write_text(index_page(overview_map(Path(notebooks) / f"{OVERVIEW}.ipynb"), paths))
     shutil.copytree(mathjax_dir(), src / "_static" / "mathjax")
     (src / "_static" / "favicon.svg").write_text(FAVICON)
-    cmd = [sys.executable, "-m", "sphinx", "-b", "html", "-E", *(["-q"] if quiet else []), str(src), str(out)]
-    done = subprocess.run(cmd, stderr=subprocess.PIPE, text=True)
-    sys.stderr.write(done.stderr)
-    if done.returncode:
-        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
-        if "No space left on device" in done.stderr:
-            raise OSError(errno.ENOSPC, f"Sphinx could not write the book ({last})", str(out))
-        raise ValueError(f"Sphinx failed to build the book into {out} (exit status {done.returncode}): {last}")
-    return out / "index.html"
 
 
 def command_line() -> cli.Parser:

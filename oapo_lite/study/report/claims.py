@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from oapo_lite.cli import names
 from oapo_lite.study.catalogue import grid
 from oapo_lite.study.catalogue.figures import get_figure
 from oapo_lite.study.judge import verdicts
@@ -39,7 +40,7 @@ def moved(vs: list[Verdict], other: list[Verdict], budget: str) -> str:
 def table(figures, budgets=SEED_BUDGETS) -> pd.DataFrame:
     """Tidy: one row per (budget, claim) of ``figures`` at every budget in ``budgets`` whose runs
     are all on disk, with the interval the verdict reads, the verdict and why."""
-    figures, budgets = _names(figures, "figures"), _names(budgets, "budgets")
+    figures, budgets = names(figures, "figures"), names(budgets, "budgets")
     for b in budgets:
         grid.get_budget(b)
     rows = []
@@ -52,13 +53,6 @@ def table(figures, budgets=SEED_BUDGETS) -> pd.DataFrame:
     if not rows:
         raise FileNotFoundError(f"no budget in {budgets} has every run of {figures} on disk")
     return pd.DataFrame(rows)
-
-
-def _names(value, what: str) -> tuple:
-    """A sequence of names; one name given as a string is refused, not split into letters."""
-    if isinstance(value, str):
-        raise TypeError(f"{what} must be a sequence of names, got the string {value!r}; write ({value!r},)")
-    return tuple(value)
 
 
 def budget_share(figure, env: str | None, budget: str = "cpu", on_disk: int | None = None) -> str:

@@ -18,8 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from oapo_lite import cli
+from oapo_lite.cli import boolean
 from oapo_lite.envs import registry as env_registry
+from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
+from oapo_lite.store import is_file
 from oapo_lite.study.runs import experiments, readme
 from oapo_lite.study.catalogue.figures import FIGURES, runs_of
 
@@ -46,7 +50,7 @@ class Price:
 def table(path=None) -> dict[tuple, Price]:
     """The committed table (or the one at ``path``): key -> price."""
     path = COSTS if path is None else path
-    if not path.exists():
+    if not is_file(path, "cost table"):
         return {}
     df = pd.read_csv(path, dtype=str, keep_default_na=False)  # "None" is a key value, not a missing one
     return {tuple(row[k] for k in KEY): Price(float(row["cpu_per_kstep"]), "table") for _, row in df.iterrows()}
@@ -57,6 +61,7 @@ def recorded(runs: list[tuple[TrainConfig, pd.DataFrame]]) -> dict[tuple, Price]
     per 1,000 env steps (a run without a record, trained before costs were recorded, gives none)."""
     per_key: dict[tuple, list[float]] = {}
     for cfg, df in runs:
+        results.check_values(df[[c for c in ("step", "cpu_s", "wall_s") if c in df]])  # a sum that fell prices nothing
         if "cpu_s" in df and df["cpu_s"].notna().all():
             per_key.setdefault(cost_key(cfg), []).append(1000 * float(df["cpu_s"].iloc[-1]) / cfg.steps)
     return {k: Price(float(np.median(v)), "records") for k, v in per_key.items()}
@@ -83,6 +88,7 @@ def plan(budget: str, figures=FIGURES, workers: int = 2,
     its CPU hours; and the wall hours of the runs to train on ``workers`` processes, as
     ``run_all`` orders them. ``from_nothing``: as if no run were on disk (what the budget costs).
     Reads only."""
+    from_nothing, workers = boolean(from_nothing, "from_nothing"), cli.workers(workers, "workers")
     prices = table()
     on_disk, finished = {}, []
     runs = experiments.grid_runs(budget, figures)
@@ -125,6 +131,14 @@ def wall_hours(todo: list, prices: dict, workers: int) -> float:
     return max(max(free), spread) / 3600
 
 
+LEGEND = """\
+columns: runs and env steps of each figure at the budget (the total counts a run of two figures once); on
+disk: runs already trained and whole in the run cache; to train and steps to train: the others; CPU hours:
+of the runs to train, from their price per env step; from: where that price comes from: records (finished
+runs of the same engine, algorithm and batch shape), table (figures/data/costs.csv, benchmarks/costs.py),
+none (no price: the hours leave those runs out), - (nothing to train)."""
+
+
 def describe(budget: str, lines: list[Line], total: Line, wall: float, workers: int) -> str:
     """The plan as a table and a closing sentence."""
     head = ["figure", "runs", "env steps", "on disk", "to train", "steps to train", "CPU hours", "from"]
@@ -134,7 +148,7 @@ def describe(budget: str, lines: list[Line], total: Line, wall: float, workers: 
     text = "\n".join("  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in [head, *body])
     unpriced = (f"; {total.unpriced} run(s) to train have no measured cost (no record, not in {COSTS.name}: "
                 "run benchmarks/costs.py), so the hours leave them out" if total.unpriced else "")
-    return (f"{text}\n\nbudget {budget!r}: {total.todo_runs} of {total.runs} runs to train, {total.cpu_hours:.1f} CPU "
+    return (f"{text}\n\n{LEGEND}\n\nbudget {budget!r}: {total.todo_runs} of {total.runs} runs to train, {total.cpu_hours:.1f} CPU "
             f"hours, about {_wall(wall)} of wall time on {workers} worker(s){unpriced}. Costs measured on "
             f"{_machines()}; nothing was trained or written.")
 
@@ -153,7 +167,7 @@ def _wall(hours: float) -> str:
 
 
 def _machines() -> str:
-    if not COSTS.exists():
+    if not is_file(COSTS, "cost table"):
         return "no machine (no table)"
     df = pd.read_csv(COSTS)
     machines = sorted({(m, int(c)) for m, c in zip(df["cpu_model"], df["cpu_count"])})

@@ -1,7 +1,8 @@
 """Where the runs of a grid are trained: this machine's processes ("local") or a Ray cluster ("ray").
 
-An executor takes (run, checkpoint folder) jobs and yields ``(run, rows, error)`` as runs
-finish, in any order: the evaluation rows and None, or None and a traceback. Both train a run
+An executor takes (run, checkpoint folder) jobs and yields ``(run, rows, error, trained)`` as
+runs finish, in any order: the evaluation rows and None, or None and a traceback; ``trained``
+says whether the job trained any iteration (``train_job``). Both train a run
 with the same function, ``train_job``; the driver (``experiments.run_all``) writes the results,
 so an executor never touches the run cache.
 """
@@ -12,6 +13,7 @@ import os
 import pickle
 import re
 import signal
+import socket
 import sys
 import tempfile
 import threading
@@ -29,24 +31,37 @@ PACKAGE = Path(__file__).resolve().parents[2]
 
 
 def train_job(cfg, checkpoints: str):
-    """Train one run; (rows, None), or (None, why) when it raises: a failed run is reported by
+    """Train one run; (rows, None, trained), or (None, why, False) when it raises. ``trained`` is
+    False where another process wrote the run's checkpoint while this job waited for its lock and
+    left nothing to train (two ``reproduce`` on one cache: the first trains). A failed run is reported by
     the driver while the others go on, with one line where the error says what to do
     (``cli.KNOWN``: a bad value, a file in the way), else its traceback (a bug). A damaged
     checkpoint is named and the run trained again from the start (the cache's runs are
     deterministic). Memory, disk or permissions running out is (None, ``RESOURCE`` + one line):
     the driver then stops."""
+    iterations, checkpoint = [], Path(checkpoints) / "checkpoint.pt"
+    before = _written(checkpoint)
     try:
         try:
-            rows = train(cfg, checkpoints, progress=False)
+            rows = train(cfg, checkpoints, progress=False, callback=iterations.append)
         except DamagedFile as err:
             print(f"warning: {err}; training the run again from the start", file=sys.stderr, flush=True)
-            rows = train(cfg, checkpoints, resume=False, progress=False)
+            rows = train(cfg, checkpoints, resume=False, progress=False, callback=iterations.append)
     except Exception as err:
         resource = resource_error(err)  # the machine's, not the run's: the driver stops every run
         if resource:
-            return None, RESOURCE + resource
-        return None, f"error: {' '.join(str(err).split())}" if isinstance(err, KNOWN) else traceback.format_exc()
-    return rows, None
+            return None, RESOURCE + resource, False
+        why = f"error: {' '.join(str(err).split())}" if isinstance(err, KNOWN) else traceback.format_exc()
+        return None, why, False
+    return rows, None, bool(iterations) or _written(checkpoint) == before
+
+
+def _written(path: Path) -> int | None:
+    """When ``path`` was last written (None: absent)."""
+    try:
+        return os.stat(path).st_mtime_ns
+    except OSError:
+        return None
 
 
 RESOURCE = "resource: "  # how a job's error says that memory, disk or permissions ran out
@@ -61,7 +76,7 @@ def local(jobs, workers: int = 2, address: str | None = None):
             yield (run, *train_job(run.cfg, checkpoints))
         return
     for run, outcome, died in in_processes(train_job, [(run, (run.cfg, ck)) for run, ck in jobs], workers):
-        yield (run, *outcome) if died is None else (run, None, died)
+        yield (run, *outcome) if died is None else (run, None, died, False)
 
 
 def in_processes(fn, jobs, workers: int):
@@ -193,6 +208,28 @@ def check_address(address: str | None) -> None:
                      "a numeric host as four numbers 0-255)")
 
 
+CONNECT_S = 10  # how long a driver waits for a cluster's head to answer before it says so
+
+
+def reach(address: str, deadline: float = CONNECT_S) -> None:
+    """Refuse a cluster address whose head does not answer within ``deadline`` seconds, naming
+    the address, the wait and the cause (no such host, refused, no answer): Ray itself retries an
+    address that nothing answers at for many minutes (seen: 580 s and counting)."""
+    host, port = address.removeprefix("ray://").rsplit(":", 1)
+    try:
+        socket.create_connection((host, int(port)), timeout=deadline).close()
+    except socket.gaierror as err:
+        raise ConnectionError(f"Ray address {address!r}: no such host {host!r} ({err.strerror}); check the address "
+                              "(--address)") from None
+    except TimeoutError:
+        raise ConnectionError(f"no Ray cluster answered at {address!r} within {deadline:g} s; start one there "
+                              "(ray start --head) or check the address (--address)") from None
+    except OSError as err:
+        raise ConnectionError(f"no Ray cluster at {address!r}: {str(err.strerror or err).lower()} (a connection waits "
+                              f"at most {deadline:g} s); start one there (ray start --head) or check the address "
+                              "(--address)") from None
+
+
 def connect(address: str | None, attempts: int = 3, **init_kwargs):
     """The ``ray`` module, connected to the cluster at ``address`` ("auto": the one running on
     this machine), or to a new one on this machine when None; and whether we connected (and so
@@ -218,7 +255,17 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
     if ray.is_initialized():
         return ray, False
     if address is not None:
-        ray.init(address=address, **init_kwargs)
+        if address != "auto":
+            reach(address)
+        # a head that answers but is no Ray GCS: Ray's own connect loop, bounded by the same wait (for
+        # this connection only: a private cluster's start reads the variable too)
+        given = os.environ.get("RAY_gcs_server_port_wait_time_s")
+        os.environ["RAY_gcs_server_port_wait_time_s"] = given or str(CONNECT_S)
+        try:
+            ray.init(address=address, **init_kwargs)
+        finally:
+            if given is None:
+                del os.environ["RAY_gcs_server_port_wait_time_s"]
         return ray, True
     # A private cluster listens on loopback only (Ray binds its servers to the node's address) and
     # without a dashboard, so no other machine can reach it; ``init_kwargs`` may ask otherwise
@@ -268,10 +315,10 @@ def on_ray(jobs, workers: int | None = None, address: str | None = None):
             (ref,), _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ref)
             try:
-                rows, error = ray.get(ref)
+                rows, error, trained = ray.get(ref)
             except ray.exceptions.RayError as err:  # the task never returned: worker or node lost
-                rows, error = None, f"{type(err).__name__}: {err}"
-            yield run, rows, error
+                rows, error, trained = None, f"{type(err).__name__}: {err}", False
+            yield run, rows, error, trained
     finally:
         if connected:
             ray.shutdown()

@@ -20,13 +20,13 @@ import numpy as np
 import pandas as pd
 
 from oapo_lite.algorithms import ALGOS
-from oapo_lite.cli import output_folder
+from oapo_lite.cli import boolean, names, output_folder, workers as cli_workers
 from oapo_lite.envs import registry as env_registry
 from oapo_lite.envs.maps import load_maze
 from oapo_lite.neural import results
 from oapo_lite.neural.config import TrainConfig
-from oapo_lite.store import DamagedFile, read_arrays, write_frame
-from oapo_lite.study.catalogue.figures import FIGURES, figure_runs, get_figure, runs_of
+from oapo_lite.store import DamagedFile, is_file, read_arrays, regular_file, write_frame
+from oapo_lite.study.catalogue.figures import FIGURES, figure_runs, get_figure, required_runs, runs_of
 from oapo_lite.study.catalogue.grid import COMMITTED, SHARED_RUNS, Run
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -64,9 +64,9 @@ def read_run(cfg: TrainConfig, budget: str) -> pd.DataFrame:
     (``results.COLUMNS``). A file that is not whole raises ``DamagedFile`` naming it (``run_all``
     then trains the run again). A file read before and unchanged since is not read again."""
     path = run_path(cfg, budget)
-    stat = path.stat()  # FileNotFoundError: not on disk
-    if path.is_dir():  # not a damaged result: something the cache must not overwrite
-        raise ValueError(f"run file {path} is a folder; delete or move it")
+    # FileNotFoundError: not on disk; a folder, a FIFO or a device is not a damaged result but
+    # something the cache must neither read nor overwrite (NotAFile)
+    stat = regular_file(path, "run file")
     version = (path, stat.st_mtime_ns, stat.st_size)  # the path names the config
     if version not in _CHECKED:
         if len(_CHECKED) > 4096:
@@ -119,7 +119,7 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
     try:
         _check_iterations(df, cfg)
         results.check(df, cfg.flat())
-        _check_levels(df, cfg)
+        check_levels(df, cfg.env if cfg.env_fn is None else None)
     except results.BadRows as err:
         raise DamagedFile(f"run file {path} is damaged: {err}; {RETRAIN}") from None
     return df
@@ -148,22 +148,35 @@ def _check_iterations(df: pd.DataFrame, cfg: TrainConfig) -> None:
                                   f"(n_envs x rollout length) = {step / cfg.iteration_steps:g}")
 
 
-def _check_levels(df: pd.DataFrame, cfg: TrainConfig) -> None:
-    """What a row's config fixes beyond ``results.check``: on a maze, whose episodes always end and
+def check_levels(df: pd.DataFrame, env: str | None = "column", rows: np.ndarray | None = None) -> None:
+    """What a row's env fixes beyond ``results.check``: on a maze, whose episodes always end and
     whose optimum the oracle knows, every evaluation has a return, a success rate and that
-    return's fraction of the optimum."""
-    maze = env_registry.maze_of(cfg.env) if cfg.env_fn is None else None
-    if maze is None:
+    return's fraction of the optimum. ``env``: the env of every row (None: no maze's), or by
+    default each row's ``env`` column (a figure's runs, handed to ``verdicts.judge``); ``rows``:
+    the rows' numbers in the messages (by default their positions)."""
+    rows = np.arange(len(df)) if rows is None else rows
+    if env == "column":
+        for each in (df["env"].dropna().unique() if "env" in df else ()):
+            mine = (df["env"] == each).to_numpy()
+            check_levels(df[mine], each, rows[mine])
         return
-    optimum = _optimum(cfg.env)
-    for i, row in enumerate(df[["step", "eval_return", "frac_opt", "eval_success"]].itertuples(index=False)):
-        for name in ("eval_return", "frac_opt", "eval_success"):
-            if pd.isna(getattr(row, name)):
-                raise results.BadRows(f"its {name} column at row {i + 1} (step {row.step}) is empty; allowed: a "
-                                      "number (a maze's evaluation episodes always end)")
-        if not np.isclose(row.frac_opt * optimum, row.eval_return, rtol=1e-9, atol=1e-9):
-            raise results.BadRows(f"its frac_opt column at row {i + 1} (step {row.step}) holds {row.frac_opt!r}; "
-                                  f"allowed: eval_return / the maze's optimum = {row.eval_return / optimum!r}")
+    if env is None or env_registry.maze_of(env) is None:
+        return
+    steps = df["step"].tolist() if "step" in df else [None] * len(df)
+    for name in (c for c in ("eval_return", "frac_opt", "eval_success") if c in df):
+        empty = np.flatnonzero(df[name].isna().to_numpy())
+        if len(empty):
+            i = empty[0]
+            raise results.BadRows(f"its {name} column at row {rows[i] + 1} (step {steps[i]}) is empty; allowed: a "
+                                  "number (a maze's evaluation episodes always end)")
+    if {"eval_return", "frac_opt"} <= set(df):
+        optimum = _optimum(env)
+        ret, frac = (pd.to_numeric(df[c], errors="coerce").to_numpy(float) for c in ("eval_return", "frac_opt"))
+        wrong = np.flatnonzero(~np.isclose(frac * optimum, ret, rtol=1e-9, atol=1e-9))
+        if len(wrong):
+            i = wrong[0]
+            raise results.BadRows(f"its frac_opt column at row {rows[i] + 1} (step {steps[i]}) holds {float(frac[i])!r}; "
+                                  f"allowed: eval_return / the maze's optimum = {float(ret[i] / optimum)!r}")
 
 
 @functools.cache
@@ -213,7 +226,7 @@ def on_disk(cfg: TrainConfig, budget: str) -> bool:
 def grid_runs(budget: str, figures=FIGURES) -> list[Run]:
     """The distinct runs of some figures (a run shared by two figures is trained once)."""
     runs, seen = [], set()
-    for fig in figures:
+    for fig in names(figures, "figures"):
         for run in runs_of(fig, budget):
             if run.cfg.run_id() not in seen:
                 seen.add(run.cfg.run_id())
@@ -245,27 +258,35 @@ def _cost(cfg: TrainConfig) -> int:
 
 @dataclass
 class RunCount:
-    done: int
-    cached: int
+    done: int  # trained by this call
+    cached: int  # on disk before it, or finished by another process while it waited (``train_job``)
     failed: list[Failure] = field(default_factory=list)
 
 
-def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str = True,
+def run_all(budget: str, figures=None, workers: int = 2, progress: bool | str = True,
             executor: str = "local", address: str | None = None) -> RunCount:
     """Train every run of the given figures that is not on disk yet, on ``executor``: "local"
     (``workers`` processes of this machine) or "ray" (a Ray cluster at ``address``; None starts
     one on this machine). Whatever trains a run, this driver writes its CSV. A run that fails
     is reported (config and traceback) and the others go on; see ``RunCount.failed``.
-    ``progress``: True (a bar), "lines" (one line per run, for logs) or False."""
+    ``progress``: True (a bar), "lines" (one line per run, for logs) or False. ``figures``: None
+    for every figure (one without runs at ``budget`` has nothing to train), else figures that
+    have runs there (``required_runs``), or one figure's name."""
     from tqdm import tqdm
 
     from oapo_lite.study.runs import executors
 
     if executor not in executors.EXECUTORS:
         raise ValueError(f"unknown executor {executor!r}; choose from {sorted(executors.EXECUTORS)}")
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise ValueError(f"workers = {workers!r} is invalid; allowed: an integer >= 1")
-    figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
+    workers = cli_workers(workers, "workers")
+    if progress != "lines" and not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"run_all's progress must be True, False or \"lines\", got {progress!r}")
+    if figures is None:
+        figures = FIGURES
+    else:
+        figures = (figures,) if isinstance(figures, str) else figures  # one figure's name
+        for figure in figures:
+            required_runs(figure, budget)
     todo, skipped = [], {}
     for run in grid_runs(budget, figures):
         missing_engine = _missing_engine(run.cfg)
@@ -283,10 +304,11 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
     if missing:  # made here, so that a worker can tell whether it shares this file system
         checkpoints.mkdir(parents=True, exist_ok=True)
     jobs = [(run, str(checkpoints / run.cfg.run_id())) for run in missing]
-    failed = []
+    failed, elsewhere = [], 0
     with tqdm(total=len(missing), desc=f"runs ({budget}, {executor})", disable=progress is not True) as bar:
-        for k, (run, rows, error) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
-                                                                              address=address), 1):
+        for k, (run, rows, error, trained) in enumerate(executors.EXECUTORS[executor](jobs, workers=workers,
+                                                                                       address=address), 1):
+            elsewhere += error is None and not trained
             if error is None:
                 write_frame(rows, run_path(run.cfg, budget))
             elif error.startswith(executors.RESOURCE):  # every other run would fail alike: stop them all
@@ -301,7 +323,8 @@ def run_all(budget: str, figures=FIGURES, workers: int = 2, progress: bool | str
                       f"{run.cfg.run_id()}", flush=True)
     for figure in figures:
         export_figure(figure, budget)
-    return RunCount(done=len(missing) - len(failed), cached=len(todo) - len(missing), failed=failed)
+    return RunCount(done=len(missing) - len(failed) - elsewhere, cached=len(todo) - len(missing) + elsewhere,
+                    failed=failed)
 
 
 def export_figure(figure, budget: str) -> Path | None:
@@ -313,7 +336,7 @@ def export_figure(figure, budget: str) -> Path | None:
         return None  # not a grid figure, no runs at this budget, or not all of them yet
     df, _ = read_figure(name, budget)
     path = data_dir(budget) / f"{name}.csv"
-    old = path.read_bytes() if path.exists() else None
+    old = path.read_bytes() if is_file(path, "figure file") else None
     staged = path.with_name(f".{path.name}.new")
     write_frame(df, staged)
     if staged.read_bytes() == old:
@@ -324,13 +347,15 @@ def export_figure(figure, budget: str) -> Path | None:
 
 
 def missing_runs(figure: str, budget: str) -> list[Run]:
-    """The runs of ``figure`` at ``budget`` that are not on disk yet (or damaged)."""
+    """The runs of ``figure`` at ``budget`` that are not on disk yet (or damaged); none for a
+    figure without runs there (notebook 20 asks at every budget)."""
     return [r for r in runs_of(figure, budget) if not on_disk(r.cfg, budget)]
 
 
 def train_runs(budget: str, figures, workers: int = 2) -> None:
     """Train the runs of ``figures`` at ``budget`` that are not on disk yet, and raise if any
     failed: loading a figure never trains, so a notebook that may train says so with this call."""
+    figures = names(figures, "train_runs' figures")
     failed = run_all(budget, figures=figures, workers=workers, progress=False).failed
     if failed:
         raise RuntimeError(f"{len(failed)} run(s) of {[get_figure(f).id for f in figures]} failed "
@@ -354,7 +379,11 @@ def versions(figure: str, budget: str) -> tuple:
 
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
-    with ``skip_missing``; otherwise a run not on disk raises naming it). Reads only."""
+    with ``skip_missing``; otherwise a run not on disk raises naming it). A figure with no runs at
+    ``budget`` is refused, or with ``skip_missing`` read as empty (the tables that show what is on
+    disk at any budget). Reads only."""
+    if not boolean(skip_missing, "skip_missing"):
+        required_runs(figure, budget)
     frames, missing = [], []
     for label, cfg in figure_runs(figure, budget):
         try:
@@ -374,8 +403,17 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
 
 
 def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:
-    """``read_figure``, saying what it left out. Reads only: nothing is trained (``train_runs``)
-    and nothing written (``export_figure``)."""
+    """``read_figure``, saying what it left out. A figure with no runs at ``budget`` is refused,
+    naming the budgets it has runs at; with ``skip_missing`` (a notebook that shows what is on
+    disk at any budget) it is an empty frame and a warning that says so. Reads only: nothing is
+    trained (``train_runs``) and nothing written (``export_figure``)."""
+    if boolean(skip_missing, "skip_missing") and not runs_of(figure, budget):  # a bad name still raises here
+        try:
+            required_runs(figure, budget)
+        except ValueError as err:
+            print(f"warning: {err}")
+            return pd.DataFrame()
+    required_runs(figure, budget)
     df, missing = read_figure(figure, budget, skip_missing)
     if df.empty:
         return df

@@ -22,7 +22,7 @@ from oapo_lite.envs import registry as env_registry
 from oapo_lite.neural.nets import owners
 from oapo_lite.neural.results import STRUCTURE
 from oapo_lite.neural.seps import group_labels
-from oapo_lite.store import atomic_write
+from oapo_lite.store import atomic_write, regular_file
 from oapo_lite.study.catalogue.figures import FIGURES
 from oapo_lite.study.catalogue.figures.layouts import study_runs
 from oapo_lite.study.catalogue.grid import SHARED_RUNS
@@ -46,6 +46,7 @@ def structure_columns(cfg, rows: list[dict]) -> list[tuple[str, str]]:
 
 def migrate(path, cfg) -> bool:
     """Add the two columns to the run file ``path`` of config ``cfg`` if it lacks them."""
+    regular_file(path, "run file")
     text = path.read_text()
     rows = list(csv.reader(io.StringIO(text)))
     if set(STRUCTURE) <= set(rows[0]):

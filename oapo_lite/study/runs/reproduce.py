@@ -14,7 +14,7 @@ from pathlib import Path
 
 from oapo_lite import cli
 from oapo_lite.study.catalogue import grid
-from oapo_lite.study.catalogue.figures import FIGURES, get_figure
+from oapo_lite.study.catalogue.figures import FIGURES, required_runs
 
 ROOT = Path(__file__).resolve().parents[3]
 NOTEBOOKS = ROOT / "notebooks"
@@ -141,9 +141,9 @@ def run_notebooks(budget: str, inplace: bool, workers: int = 2) -> list[tuple[st
     return [(path.name, timings[path.name]) for path in paths]
 
 
-def _positive(text: str) -> int:
-    if not text.lstrip("+").isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is invalid; allowed: an integer >= 1")
+def _workers(text: str) -> int:
+    if not text.lstrip("+").isdigit() or not 1 <= int(text) <= cli.MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f"{text!r} is invalid; allowed: an integer in [1, {cli.MAX_WORKERS}]")
     return int(text)
 
 
@@ -177,6 +177,18 @@ def _check_committed_data(moved: Path, budget: str, figures) -> None:
                          "(--skip-notebooks)")
 
 
+def _counted(experiments, cfg, budget: str) -> bool:
+    """Whether a run is on disk, for the line an interrupt prints: a path in the cache that is no
+    file (``store.NotAFile``, named when the run was read) counts as not on disk here, so that the
+    stop cannot fail."""
+    from oapo_lite.store import NotAFile
+
+    try:
+        return experiments.on_disk(cfg, budget)
+    except NotAFile:
+        return False
+
+
 def _cluster_cpus(address: str | None) -> int:
     """The CPUs of the Ray cluster at ``address``; a private one would have this machine's."""
     if address is None:
@@ -201,9 +213,9 @@ def command_line() -> cli.Parser:
                                            "into build/notebooks/<budget>/"))
     parser.add_argument("--check", action="store_true",
                         help=cli.flag_help("CI mode: a line per finished run instead of progress bars", "bars"))
-    parser.add_argument("--workers", type=_positive, default=2,
+    parser.add_argument("--workers", type=_workers, default=2,
                         help=cli.flag_help("parallel training processes (local executor), then notebooks", 2,
-                                           "an integer >= 1"))
+                                           f"an integer in [1, {cli.MAX_WORKERS}]"))
     parser.add_argument("--executor", default="local", choices=["local", "ray"],
                         help=cli.flag_help("where runs are trained: this machine's processes, or a Ray cluster",
                                            "local", "local or ray"))
@@ -211,7 +223,7 @@ def command_line() -> cli.Parser:
                         help=cli.flag_help("the Ray cluster: auto (the one running on this machine) or its head's "
                                            "HOST:PORT", "a private cluster on this machine",
                                            "auto, HOST:PORT or ray://HOST:PORT"))
-    parser.add_argument("--figures", nargs="+", default=list(FIGURES), metavar="FIGURE",
+    parser.add_argument("--figures", nargs="+", default=None, metavar="FIGURE",
                         help=cli.flag_help("train only these figures' runs", "every figure",
                                            f"one or more of {list(FIGURES)}"))
     parser.add_argument("--skip-notebooks", action="store_true",
@@ -224,14 +236,18 @@ def command_line() -> cli.Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    parser = command_line()
+    args = parser.parse_args(argv)  # first: --help and a bad flag answer before the heavy imports
     from oapo_lite.study.runs import experiments
 
-    parser = command_line()
-    args = parser.parse_args(argv)
     try:  # fail fast, naming what is allowed
         grid.get_budget(args.budget)
-        for figure in args.figures:
-            get_figure(figure)
+        every = args.figures is None
+        if every:  # every figure: those without runs at the budget have nothing to do
+            args.figures = list(FIGURES)
+        else:  # a figure named on purpose that has no runs at the budget would read as "nothing to do"
+            for figure in args.figures:
+                required_runs(figure, args.budget)
         if args.inplace and args.skip_notebooks:
             raise ValueError("--inplace writes the executed notebooks, and --skip-notebooks runs none; give one")
         if args.address is not None and args.executor != "ray":
@@ -257,11 +273,11 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     signal.signal(signal.SIGTERM, cli.interrupt)  # a SIGTERM stops the work as Ctrl-C does
     try:
-        runs = experiments.run_all(args.budget, figures=args.figures, workers=args.workers,
+        runs = experiments.run_all(args.budget, figures=None if every else args.figures, workers=args.workers,
                                    progress="lines" if args.check else True, executor=args.executor,
                                    address=args.address)
     except KeyboardInterrupt:
-        done = sum(experiments.on_disk(r.cfg, args.budget) for r in experiments.grid_runs(args.budget, args.figures))
+        done = sum(_counted(experiments, r.cfg, args.budget) for r in experiments.grid_runs(args.budget, args.figures))
         print(f"\ninterrupted: {done} runs of {args.figures} at budget {args.budget!r} are on disk, queued runs "
               "were not started, running ones stopped (they resume from their last checkpoint); run the same "
               "command again to resume", file=sys.stderr)

@@ -39,7 +39,7 @@ from oapo_lite.neural.learner import Update
 from oapo_lite.neural.rollout import make_env
 from oapo_lite.neural.runstate import git_revision
 from oapo_lite.neural.train import train
-from oapo_lite.store import atomic_write, write_frame
+from oapo_lite.store import atomic_write, regular_file, write_frame
 from oapo_lite.study.catalogue import figures
 from oapo_lite.study.runs import experiments
 from oapo_lite.study.judge.evidence import REUSE_PART
@@ -140,4 +140,6 @@ def run(envs=ENVS, seeds=(0, 1, 2)) -> None:
 def load() -> pd.DataFrame:
     """Every recorded run's rows (empty when none is on disk)."""
     paths = sorted(DATA.glob("*.csv"))
+    for path in paths:
+        regular_file(path, "gate-study record")
     return pd.concat([pd.read_csv(p) for p in paths], ignore_index=True) if paths else pd.DataFrame()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.study.catalogue.figures import grf, mazes, mujoco, smax
-from oapo_lite.study.catalogue.grid import Figure, Run
+from oapo_lite.study.catalogue.grid import BUDGETS, Figure, Run
 
 GRID = (*mazes.FIGURES, *smax.FIGURES, *mujoco.FIGURES, *grf.FIGURES)
 FIGURES = tuple(f.id for f in GRID)
@@ -27,6 +27,18 @@ def get_figure(figure: Figure | str) -> Figure:
 def runs_of(figure: Figure | str, budget: str) -> list[Run]:
     """A figure's runs at a budget (``Figure.runs``), the figure by its id or as it is."""
     return get_figure(figure).runs(budget)
+
+
+def required_runs(figure: Figure | str, budget: str) -> list[Run]:
+    """``runs_of``, refusing a figure that has no runs at ``budget`` (a ``ValueError`` naming the
+    budgets it has runs at): where it is named on purpose, an empty answer would read as "nothing
+    to do" or "nothing on disk"."""
+    runs = runs_of(figure, budget)
+    if not runs:
+        fig = get_figure(figure)
+        raise ValueError(f"figure {fig.id!r} has no runs at budget {budget!r}; it has runs at "
+                         f"{[b for b in BUDGETS if fig.runs(b)]}")
+    return runs
 
 
 def figure_runs(figure: Figure | str, budget: str) -> list[tuple[object, TrainConfig]]:
