@@ -26,6 +26,23 @@ def test_split_outcomes_are_drawn_by_a_level_some_seed_reached_with_every_seed_o
     plt.close("all")
 
 
+def test_curves_against_cpu_seconds_put_each_seed_at_its_own_seconds_and_the_median_at_theirs():
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    # three seeds of one curve, the same win rates, at 1, 2 and 4 CPU seconds per evaluation
+    df = pd.DataFrame([dict(label="happo", seed=s, step=t, eval_success=t / 2, cpu_s=t * rate)
+                       for s, rate in enumerate((1.0, 2.0, 4.0)) for t in (0, 1, 2)])
+    ax = plotting.learning_curves(df, y="eval_success", x="cpu_s")
+    bold, *seeds = ax.get_lines()[:4]
+    assert list(bold.get_xdata()) == [0.0, 2.0, 4.0] and list(bold.get_ydata()) == [0.0, 0.5, 1.0]
+    assert [list(line.get_xdata()) for line in seeds] == [[0.0, 1.0, 2.0], [0.0, 2.0, 4.0], [0.0, 4.0, 8.0]]
+    assert ax.get_xlabel().startswith("CPU seconds")
+    with pytest.raises(ValueError, match="x = 'wall' is invalid"):
+        plotting.learning_curves(df, y="eval_success", x="wall")
+    plt.close("all")
+
+
 def _figure_curves(figure) -> list[str]:
     """A grid figure's curves as the figures name them (a sweep's value as "sigma = 0.1")."""
     sweep = {"fig3c": "sigma", "fig3d": "lambda"}.get(figure.id)

@@ -19,21 +19,25 @@ STEPS = FuncFormatter(lambda x, _: f"{x / 1e6:g}M" if abs(x) >= 1e6 else f"{x / 
 
 
 def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_opt", ylabel=None,
-                    legend: dict | None = None):
+                    legend: dict | None = None, x: str = "step"):
     """Fig. 3b-d, 4, App. A: every seed as a thin line (on top) and, bold, the median over seeds
     of ``y`` against env steps (the lower middle seed where the count is even, so at every step
     a level some seed reached). Not mean +- std, nor an IQM: outcomes that split into trapped
     and optimal seeds have a mean that describes no run and a band that leaves the possible
     range. The title gets a line saying so. Each curve in its colour (``palette.color``), named
-    in the legend by ``legend[label]`` where given (e.g. with its seed count)."""
+    in the legend by ``legend[label]`` where given (e.g. with its seed count). ``x="cpu_s"`` draws
+    them against the CPU seconds each run had spent by its own records (a seed's line at its own
+    seconds, the bold one at the median seconds of each evaluation): learning per unit of compute."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"the runs must be a pandas DataFrame (e.g. experiments.load_figure's), got {type(df).__name__}")
     ax = ax or plt.subplots(figsize=(6, 4))[1]
     if df.empty:  # e.g. load_figure(..., skip_missing=True) with nothing on disk
         return _no_runs(ax, title)
-    lacking = [c for c in ("label", "seed", "step", y) if c not in df]
+    if x not in ("step", "cpu_s"):
+        raise ValueError(f"x = {x!r} is invalid; allowed: 'step' (env steps) or 'cpu_s' (CPU seconds)")
+    lacking = [c for c in ("label", "seed", "step", y, x) if c not in df]
     if lacking:
-        raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step and {y!r}")
+        raise ValueError(f"the runs lack the columns {lacking}; they need label, seed, step, {y!r} and {x!r}")
     if not pd.api.types.is_numeric_dtype(df[y]):
         raise ValueError(f"the runs' {y!r} column holds text (e.g. {df[y].iloc[0]!r}); allowed: numbers")
     twice = df[df.duplicated(["label", "seed", "step"])]
@@ -49,20 +53,24 @@ def learning_curves(df: pd.DataFrame, order=None, ax=None, title=None, y="frac_o
         runs = df[df["label"] == label].pivot(index="step", columns="seed", values=y)
         if runs.isna().all().all():
             raise ValueError(f"curve {label!r} has no value of {y!r} to draw (every evaluation is empty)")
+        at = (df[df["label"] == label].pivot(index="step", columns="seed", values=x) if x != "step"
+              else pd.DataFrame(np.repeat(runs.index.to_numpy()[:, None], runs.shape[1], 1), index=runs.index))
         color = palette.color(label)
         median = np.quantile(runs.to_numpy(float), 0.5, axis=1, method="lower")
-        line, = ax.plot(runs.index, median, lw=2.2, label=str((legend or {}).get(label, label)), color=color, zorder=2,
-                        ls=palette.dashes(label))
-        seeds_of[label] = (runs, line.get_color())
-    for label, (runs, color) in seeds_of.items():
-        ax.plot(runs.index, runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3, ls=palette.dashes(label))
-    ax.xaxis.set_major_formatter(STEPS)
+        line, = ax.plot(np.nanmedian(at.to_numpy(float), axis=1), median, lw=2.2,
+                        label=str((legend or {}).get(label, label)), color=color, zorder=2, ls=palette.dashes(label))
+        seeds_of[label] = (at, runs, line.get_color())
+    for label, (at, runs, color) in seeds_of.items():
+        ax.plot(at.to_numpy(float), runs.to_numpy(float), lw=0.8, alpha=0.5, color=color, zorder=3,
+                ls=palette.dashes(label))
+    if x == "step":
+        ax.xaxis.set_major_formatter(STEPS)
     if y == "frac_opt":
         ax.axhline(1.0, color="grey", ls="--", lw=1)
     seeds = df.groupby("label")["seed"].nunique()
     note = f"bold: the median of {'/'.join(map(str, sorted(set(seeds))))} seeds; thin: each seed"
-    ax.set(xlabel="environment steps", ylabel=ylabel or YLABELS.get(y, y),
-           title=f"{title}\n{note}" if title else note)
+    ax.set(xlabel="environment steps" if x == "step" else "CPU seconds (each run's own records)",
+           ylabel=ylabel or YLABELS.get(y, y), title=f"{title}\n{note}" if title else note)
     ax.legend(frameon=False)
     return ax
 
