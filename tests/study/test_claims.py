@@ -98,7 +98,7 @@ def test_every_row_says_what_its_record_holds_and_the_summary_counts_every_claim
         if v.status in (Status.REPRODUCED, Status.WITHIN_NOISE, Status.NOT, Status.CONTRADICTED):
             assert v.interval_status == v.status  # no mechanism status: the interval decides
             assert all(words.estimate(e) in row["why"] for e in v.estimates[:2])
-        elif v.status in (Status.NOT_REUSE, Status.SHARING, Status.SWITCH):
+        elif v.status in (Status.NOT_REUSE, Status.SHARING, Status.NO_SELECTION):
             assert f"by the interval alone {v.interval_status}" in row["why"]
         assert ("rests on one seed" in row["seeds"]) == v.one_seed
     counts = claims.summary(table)

@@ -14,8 +14,8 @@ from oapo_lite.study.studies import tables
 
 judge = v.judge
 REPRODUCED, WITHIN_NOISE, NOT, CONTRADICTED = Status.REPRODUCED, Status.WITHIN_NOISE, Status.NOT, Status.CONTRADICTED
-NOT_TESTABLE, NOT_RUN, NOT_REUSE, SHARING, SWITCH = (Status.NOT_TESTABLE, Status.NOT_RUN, Status.NOT_REUSE,
-                                                     Status.SHARING, Status.SWITCH)
+NOT_TESTABLE, NOT_RUN, NOT_REUSE, SHARING, NO_SELECTION = (Status.NOT_TESTABLE, Status.NOT_RUN, Status.NOT_REUSE,
+                                                           Status.SHARING, Status.NO_SELECTION)
 
 
 def curves(spec, seeds=5, steps=np.arange(0, 100_001, 5_000), noise=0.0):
@@ -342,7 +342,7 @@ def test_two_learned_curves_with_p_above_one_half_are_reproduced():
 
 def test_the_printed_rule_names_every_step():
     for word in ("Not testable", "did not learn", "reproduced", "contradicted", "within noise", "not reproduced",
-                 "not a test of reuse", "a test of sharing", "a test of reuse switched off", "25%", "90%",
+                 "not a test of reuse", "a test of sharing", "not a test of selection", "never shut", "25%", "90%",
                  "without each seed", "one peer"):
         assert word in v.RULE
 
@@ -533,15 +533,27 @@ def test_a_gate_with_one_peer_or_shut_early_is_a_test_of_reuse_switched_off():
     base = [1000, 1100, 1200, 1300, 1400, 1500]
     two = ev_.Evidence(selection_runs([b + 200 for b in base], base, base, lambda s: True, owner=(0, 1)), RETURN)
     switch = v.check(two, SELECTS)
-    assert switch.status == SWITCH and switch.interval_status == REPRODUCED and switch.reuse[0].peers == 1
+    assert switch.status == NO_SELECTION and switch.interval_status == REPRODUCED and switch.reuse[0].peers == 1
     assert "has one peer to choose: it is a switch" in words.reason(switch)
     early = ev_.Evidence(selection_runs([b + 200 for b in base], [b - 300 for b in base], base,
                                         lambda s: s <= 100_000), RETURN)
     shut = v.check(early, SELECTS)
-    assert shut.status == SWITCH and shut.reuse[0].shut_early == 6
+    assert shut.status == NO_SELECTION and shut.reuse[0].shut_early == 6
     text = words.reason(shut)
     assert "on all 6 seeds its gate last let another network in within the first 25% of the run" in text
     assert "(reuse lowered the final value)" in text and "the gate helped by switching reuse off" in text
+
+
+def test_a_gate_that_never_shut_is_always_on_reuse_not_a_selection():
+    base = [1000, 1100, 1200, 1300, 1400, 1500]
+    df = selection_runs([b + 200 for b in base], base, base, lambda s: True)
+    k = np.full((3, 3), 0.01)
+    df["kl_matrix"], df["sigma"] = [k] * len(df), 0.34  # every pair within sigma at every evaluation
+    never = v.check(ev_.Evidence(df, RETURN), SELECTS)
+    assert never.status == NO_SELECTION and never.reuse[0].never_shut == 6
+    assert "its gate never shut: its runs tested always-on reuse" in words.reason(never)
+    df["kl_matrix"] = [np.where(np.eye(3, dtype=bool), 0.0, 0.5 if s % 20_000 else 0.01) for s in df["step"]]
+    assert v.check(ev_.Evidence(df, RETURN), SELECTS).status == REPRODUCED  # it shuts at times: it chose
 
 
 def test_a_verdict_one_seed_carries_names_that_seed():

@@ -37,7 +37,8 @@ EQ9_ALGOS = tuple(a for a, spec in ALGOS.items() if spec.reuse_rule == "oapo")
 RUN_STATS = {"steps": "steps_to_threshold", "final": "final", "drawdown": "drawdown", "reached": "reached"}
 LOWER_IS_BETTER = ("steps", "drawdown")
 PER_RUN_COLUMNS = ["label", "seed", "steps_to_threshold", "reached", "initial", "final", "peak", "drawdown",
-                   "learned_at", "last_step", "reusing", "reusing_overall", "last_reuse_step", "networks", "gaps"]
+                   "learned_at", "last_step", "reusing", "reusing_overall", "last_reuse_step", "gate_open", "networks",
+                   "gaps"]
 
 
 def _checked(df: pd.DataFrame, y: str) -> pd.DataFrame:
@@ -71,6 +72,17 @@ def across_shares(run: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     run = run[run["reuse_matrix"].notna()]
     shares = [peer_share(m, list(np.asarray(o, int))) for m, o in zip(run["reuse_matrix"], run["owner"])]
     return run["step"].to_numpy(float), np.asarray(shares, float)
+
+
+def gate_open(run: pd.DataFrame) -> float:
+    """The share of a run's (evaluated iteration, learner, source on another network) whose K was
+    within the run's sigma (NaN where the rows hold no K or no sigma): 1 for a gate that never shut."""
+    if not {"kl_matrix", "sigma", "owner"} <= set(run.columns):
+        return np.nan
+    run = run[run["kl_matrix"].notna()]
+    k = [np.asarray(m, float)[~np.equal.outer(o, o)] for m, o in zip(run["kl_matrix"], run["owner"])]
+    k = np.concatenate(k) if k else np.zeros(0)
+    return float(np.mean(k <= float(run["sigma"].iloc[0]))) if len(k) else np.nan
 
 
 def learned_at(steps: np.ndarray, values: np.ndarray, initial: float, final: float) -> float:
@@ -115,6 +127,7 @@ def per_run(df: pd.DataFrame, metric: Metric = FRAC_OPT, threshold: float | None
             "reusing": float(np.mean(shares[learning] > 0)) if learning.any() else np.nan,
             "reusing_overall": float(np.mean(shares > 0)) if len(shares) else np.nan,
             "last_reuse_step": float(steps[shares > 0].max()) if (shares > 0).any() else np.nan,
+            "gate_open": gate_open(run),
             "networks": len(set(np.asarray(owner, int).tolist())) if owner is not None else np.nan,
             "gaps": int(run[y].isna().sum()),
         })
@@ -150,8 +163,9 @@ class Reuse:
     """How a curve reused the seats of other networks, over its seeds (``per_run``): the mean share
     of its evaluated iterations with some weight there while it learned and overall; the last step
     any seed's gate let another network in (NaN: never); the seeds whose gate last opened within
-    ``REUSE_PART`` of their steps, or never (shut for good early); how many networks its seats had
-    (the gate of one of them has ``networks - 1`` to choose between); whether seats share networks."""
+    ``REUSE_PART`` of their steps, or never (shut for good early), and those whose gate never shut
+    (every across-network K within sigma at every evaluated iteration); how many networks its seats
+    had (the gate of one of them has ``networks - 1`` to choose between); whether seats share networks."""
 
     curve: object
     seeds: int
@@ -159,6 +173,7 @@ class Reuse:
     overall: float
     last_open: float
     shut_early: int
+    never_shut: int
     networks: int
     sharing: bool
 
@@ -246,7 +261,8 @@ class Evidence:
         s = self.summary.loc[label]
         networks = runs["networks"].dropna()
         return Reuse(label, int(s["seeds"]), float(s["reusing"]), float(s["reusing_overall"]),
-                     float(s["last_reuse_step"]), int(early.sum()), int(networks.min()) if len(networks) else 0,
+                     float(s["last_reuse_step"]), int(early.sum()), int((runs["gate_open"] == 1.0).sum()),
+                     int(networks.min()) if len(networks) else 0,
                      bool(len(networks) and networks.min() < self.seats.get(label, 0)))
 
 

@@ -22,7 +22,7 @@ class Status(str, Enum):
     CONTRADICTED = "contradicted"
     NOT_REUSE = "not a test of reuse"
     SHARING = "a test of sharing"
-    SWITCH = "a test of reuse switched off"
+    NO_SELECTION = "not a test of selection"
     NOT_TESTABLE = "not testable at this budget"
     NOT_RUN = "not run"
 
@@ -40,8 +40,9 @@ MEANINGS = {
                       "nothing about reuse (the interval's reading is given beside it)",
     Status.SHARING: "the OAPPO reading shares networks between seats and hardly reused across them, so the claim tests "
                     "parameter sharing (the interval's reading is given beside it)",
-    Status.SWITCH: "the gate had one peer to choose or shut for good early on every seed, so its runs tested reuse "
-                   "switched on and off, not a choice among peers (the interval's reading is given beside it)",
+    Status.NO_SELECTION: "the gate did not choose among peers: it had one peer (a switch), or on every seed it shut for "
+                         "good early or never shut, so its runs tested reuse switched off or always on (the interval's "
+                         "reading is given beside it)",
     Status.NOT_TESTABLE: "a curve did not learn at this budget or has fewer than 2 seeds",
     Status.NOT_RUN: "the env has no run on disk at this budget (not trained yet, or only at `paper`, a cluster's job)",
 }
@@ -49,7 +50,7 @@ MEANINGS = {
 INTERVAL = (Status.REPRODUCED, Status.WITHIN_NOISE, Status.NOT, Status.CONTRADICTED)
 DECIDED = (Status.REPRODUCED, Status.CONTRADICTED)
 # the statuses that say what the runs tested instead of reading the interval
-MECHANISM = (Status.NOT_REUSE, Status.SHARING, Status.SWITCH)
+MECHANISM = (Status.NOT_REUSE, Status.SHARING, Status.NO_SELECTION)
 
 
 @dataclass(frozen=True)

@@ -36,10 +36,11 @@ RULE = f"""How a verdict is decided (oapo_lite.study.judge.verdicts), in this or
    not a test of reuse where that curve reused while it learned at fewer than {REUSE_PART:.0%} of
    those iterations (mean over seeds), or a test of sharing where its seats share networks. A
    claim that a gated curve selects (ends above, or is faster than, both no reuse and always-on
-   reuse) is a test of reuse switched off where the gate had one peer to choose (two networks:
-   a switch, not a choice) or, on every seed, last let another network in within the first
-   {REUSE_PART:.0%} of the run's steps (shut for good early). Either way the interval's reading
-   (step 3) is given beside it.
+   reuse) is not a test of selection where the gate had one peer to choose (two networks: a
+   switch, not a choice) or, on every seed, last let another network in within the first
+   {REUSE_PART:.0%} of the run's steps (shut for good early) or never shut (every across-network
+   K within sigma at every evaluated iteration: always-on reuse). Either way the interval's
+   reading (step 3) is given beside it.
 3. Otherwise the 95% bootstrap interval decides: reproduced when the whole interval is on the
    claimed side (of 0.5 for P(a better than b); of 0 for a paired difference, the IQM over
    seeds of a minus b, seed by seed, or for the share of seeds that reached the threshold minus
@@ -210,7 +211,8 @@ def _mechanism(ev: Evidence, claim: Claim) -> tuple[Status | None, tuple]:
             return (Status.SHARING if r.sharing else Status.NOT_REUSE), (r,)
         return None, (r,)
     readings = (r, ev.reuse(claim.curves[2]))
-    return (Status.SWITCH if r.peers <= 1 or r.shut_early == r.seeds else None), readings
+    no_choice = r.peers <= 1 or r.shut_early == r.seeds or r.never_shut == r.seeds
+    return (Status.NO_SELECTION if no_choice else None), readings
 
 
 def check(ev: Evidence | None, claim: Claim, figure: Figure | None = None) -> Verdict:

@@ -170,7 +170,7 @@ def mujoco_sentence(judged) -> str:
     v = _switch(judged)
     text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3), the paper's claim that OAPPO ends above no reuse is "
             f"{head.status} ({words.lead_estimate(head)})")
-    if v is None or v.status != Status.SWITCH:
+    if v is None or v.status != Status.NO_SELECTION:
         return text + "."
     gated, always = v.estimates[1], v.estimates[2]
     r = v.reuse[0]

@@ -96,15 +96,19 @@ def reuse(r: Reuse) -> str:
 def mechanism(v: Verdict) -> str:
     """Why the runs tested something other than the claim (``records.MECHANISM``)."""
     r = v.reuse[0]
-    if v.status == Status.SWITCH:
-        why = []
+    if v.status == Status.NO_SELECTION:
+        why, tested = [], "reuse switched off"
         if r.peers <= 1:
             why.append(f"with {r.networks} networks the gate of {r.curve} has one peer to choose: it is a switch, "
                        "not a choice")
         if r.shut_early == r.seeds:
             why.append(f"on all {r.seeds} seeds its gate last let another network in within the first "
                        f"{REUSE_PART:.0%} of the run (at {r.last_open:,.0f} steps at the latest)")
-        return "; ".join(why) + f": its runs tested reuse switched off; {shown(v)}"
+        if r.never_shut == r.seeds:
+            why.append(f"on all {r.seeds} seeds every across-network K was within sigma at every evaluated iteration: "
+                       "its gate never shut")
+            tested = "always-on reuse"
+        return "; ".join(why) + f": its runs tested {tested}; {shown(v)}"
     text = f"{reuse(r)}, below {REUSE_PART:.0%}"
     if v.status == Status.SHARING:
         text += ": its seats share networks, so the claim tests parameter sharing"
