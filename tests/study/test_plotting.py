@@ -82,3 +82,26 @@ def test_no_notebook_picks_a_colour_of_its_own():
         for cell in nbformat.read(path, as_version=4).cells:
             if cell.cell_type == "code":
                 assert not own.search(cell.source), (path.name, own.search(cell.source).group())
+
+
+def test_no_notebook_draws_a_line_in_a_default_colour():
+    """Every line, bar, dot or band a notebook draws names its colour (the palette's, an agent's, or a
+    grey): matplotlib's colour cycle would give two figures' curves colours that mean nothing."""
+    import ast
+
+    import nbformat
+
+    from oapo_lite.study.runs.reproduce import NOTEBOOKS
+
+    drawn = {"plot", "bar", "barh", "scatter", "errorbar", "fill_between", "hist", "stackplot"}
+    bare = []
+    for path in sorted(NOTEBOOKS.glob("[0-9]*.ipynb")):
+        for k, cell in enumerate(nbformat.read(path, as_version=4).cells):
+            if cell.cell_type != "code":
+                continue
+            code = "\n".join(line for line in cell.source.splitlines() if not line.lstrip().startswith(("%", "!")))
+            for node in ast.walk(ast.parse(code)):
+                if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in drawn
+                        and not {kw.arg for kw in node.keywords} & {"color", "c", "colors"}):
+                    bare.append(f"{path.name}, cell {k}: {ast.unparse(node)[:80]}")
+    assert not bare, bare

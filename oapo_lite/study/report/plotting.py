@@ -220,4 +220,8 @@ def policy_distance(kl_row: np.ndarray, sigma: float, names, learner: int, ax=No
     ax.set_xticks([])
     ax.set_yticks([])
     ax.set_title(title or f"reuse radius sigma = {sigma:g} (amber: reused, grey: omitted)")
+    ax.text(0.5, -0.04, f"distance from the centre: log10 of KL / {floor:g} (a log scale: each ring a factor 10)",
+            transform=ax.transAxes, ha="center", va="top", fontsize=8)
+    for decade in range(1, int(outer) + 1):  # a faint ring per decade, so the scale can be read off
+        ax.add_patch(plt.Circle((0, 0), decade, fill=False, color=OMITTED, lw=0.5, ls=":"))
     return ax
