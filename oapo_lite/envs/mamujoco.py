@@ -46,18 +46,25 @@ def check(name: str) -> None:
                          f"(homogeneous, i.e. equal spaces for reuse: {sorted(HOMOGENEOUS)})")
 
 
+_compiling = False  # while a model compiles, ``_warn`` keeps quiet (``_quiet_compile``)
+
+
 @contextlib.contextmanager
-def _quiet_c_stderr():
-    """Silence file descriptor 2 for a moment: MuJoCo 4 warns from C, on every compile, that
-    gymnasium's HalfCheetah model uses the deprecated attribute 'settotalmass'; nothing a
-    user can act on, and it would interleave with notebook output."""
+def _quiet_compile():
+    """Silence MuJoCo for a moment, from C (file descriptor 2) and through ``_warn``: MuJoCo 4
+    warns, on every compile, that gymnasium's HalfCheetah and Ant models use the deprecated
+    attribute 'settotalmass'; nothing a user can act on, and it would interleave with notebook
+    output."""
+    global _compiling
     sys.stderr.flush()
     saved = os.dup(2)
     with open(os.devnull, "w") as null:
         os.dup2(null.fileno(), 2)
+    _compiling = True
     try:
         yield
     finally:
+        _compiling = False
         os.dup2(saved, 2)
         os.close(saved)
 
@@ -65,7 +72,8 @@ def _quiet_c_stderr():
 def _warn(message: str) -> None:
     """MuJoCo's warnings, on stderr: its own handler also appends them to MUJOCO_LOG.TXT in the
     working folder, wherever a run or a notebook is started (a file in the user's checkout)."""
-    print(f"MuJoCo warning: {message}", file=sys.stderr, flush=True)
+    if not _compiling:
+        print(f"MuJoCo warning: {message}", file=sys.stderr, flush=True)
 
 
 def env_fn(name: str, max_steps: int):
@@ -85,7 +93,7 @@ def env_fn(name: str, max_steps: int):
     partition = None if partition.startswith("1x") else partition  # the engine's one-agent configuration
 
     def make():
-        with _quiet_c_stderr():
+        with _quiet_compile():
             return mamujoco_v1.parallel_env(robot, partition, max_episode_steps=max_steps)
 
     make.__name__ = f"mamujoco:{name}"

@@ -573,3 +573,10 @@ def test_a_verdict_one_seed_carries_names_that_seed():
         assert again.interval_status == status
     assert words.seeds(verdict) == ("6 seeds, higher on 4 of 6; rests on one seed: without any one of seeds 4 or 5 the "
                                     "interval reads reproduced")
+
+
+def test_a_curve_without_an_owner_map_beside_one_with_it_counts_no_seats():
+    # a single-agent anchor has no owner map; beside a multi-agent curve its rows carry NaN there
+    df = curves({"marl": (20_000, 1.0), "anchor": (40_000, 1.0)})
+    df["owner"] = [(0, 1, 2) if label == "marl" else np.nan for label in df["label"]]
+    assert ev_.Evidence(df).seats == {"marl": 3}

@@ -192,8 +192,10 @@ class Evidence:
         self.runs = per_run(df, metric, self.threshold)
         # each curve's algorithm (where the data names it): which curves reuse by Eq. 9
         self.algos = df.groupby("label", sort=False)["algo"].first().to_dict() if "algo" in df and len(df) else {}
-        self.seats = (df.groupby("label", sort=False)["owner"].first().map(lambda o: len(np.asarray(o))).to_dict()
-                      if "owner" in df and len(df) else {})
+        # a run without an owner map (a single-agent anchor) has no seats to count
+        owned = df[df["owner"].notna()] if "owner" in df else None
+        self.seats = ({} if owned is None else
+                      owned.groupby("label", sort=False)["owner"].first().map(lambda o: len(np.asarray(o))).to_dict())
         self.summary = _summary_of(self.runs)
 
     def without(self, seed) -> "Evidence":
