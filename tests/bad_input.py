@@ -149,3 +149,28 @@ def unix_socket(path: Path):
         sock.bind(f"{short}/s")
         os.replace(f"{short}/s", path)
         yield path
+
+
+# how the package names each kind of path that is no regular file (``store.NotAFile``)
+NOT_A_FILE = {"FIFO": "a FIFO (named pipe)", "socket": "a socket", "folder": "a folder", "device": "a character device",
+              "link to a device": "a character device"}
+
+
+@contextlib.contextmanager
+def not_a_file(path: Path, kind: str):
+    """For the block, ``path`` made into a ``kind`` of ``NOT_A_FILE`` (a device: /dev/zero itself,
+    which is yielded in place of ``path``)."""
+    if kind == "FIFO":
+        with fifo(path):
+            yield path
+        return
+    if kind == "socket":
+        with unix_socket(path):
+            yield path
+        return
+    if kind == "folder":
+        path.mkdir()
+    elif kind == "link to a device":
+        path.symlink_to("/dev/zero")
+    yield Path("/dev/zero") if kind == "device" else path
+

@@ -1,12 +1,10 @@
 """Bad map files and map texts, as a user meets them: each refusal names the map, the line and what
 is allowed."""
-import contextlib
 import re
-from pathlib import Path
 
 import pytest
 
-from bad_input import QUICK, cli_error, fifo, unix_socket
+from bad_input import NOT_A_FILE, QUICK, cli_error, not_a_file
 from oapo_lite.envs.maps import MAPS, MapError, parse_maze
 
 
@@ -74,16 +72,6 @@ def test_a_map_file_with_a_header_given_twice_trains_nothing(tmp_path, capsys):
 @pytest.mark.parametrize("kind", ["FIFO", "socket", "device", "link to a device"])
 def test_a_map_path_that_is_no_regular_file_is_named_and_never_opened(tmp_path, capsys, kind):
     """A FIFO would block the read for ever and /dev/zero never end; each is named by its kind."""
-    path = tmp_path / "map.txt"
-    with contextlib.ExitStack() as stack:
-        if kind == "FIFO":
-            stack.enter_context(fifo(path))
-        elif kind == "socket":
-            stack.enter_context(unix_socket(path))
-        elif kind == "device":
-            path = Path("/dev/zero")
-        else:
-            path.symlink_to("/dev/zero")
+    with not_a_file(tmp_path / "map.txt", kind) as path:
         err = cli_error(capsys, "train", *QUICK, "--env", str(path), "--out", str(tmp_path / "out"))
-    what = {"FIFO": "a FIFO (named pipe)", "socket": "a socket"}.get(kind, "a character device")
-    assert f"--env {path} is {what}, not a file; allowed: a built-in map" in err
+    assert f"--env {path} is {NOT_A_FILE[kind]}, not a file; allowed: a built-in map" in err

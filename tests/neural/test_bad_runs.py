@@ -1,7 +1,6 @@
 """Bad training input and damaged run folders: a config value, an argument of ``train`` or a
 checkpoint that cannot be used is named with what to do; a damaged checkpoint is trained again
 from the start; concurrent and killed writers leave nothing behind and train nothing twice."""
-import contextlib
 import errno
 import os
 import re
@@ -17,7 +16,7 @@ import pandas as pd
 import pytest
 import torch
 
-from bad_input import QUICK, SMALL, cli_error, fifo, unix_socket
+from bad_input import NOT_A_FILE, QUICK, SMALL, cli_error, fifo, not_a_file
 from oapo_lite import __main__ as cli, store
 from oapo_lite.algorithms import ALGOS
 from oapo_lite.neural.config import TrainConfig, readers
@@ -269,15 +268,8 @@ def test_a_checkpoint_whose_record_contradicts_itself_is_named_as_damaged(tmp_pa
 def test_a_checkpoint_that_is_no_regular_file_is_named_and_never_opened(tmp_path, kind):
     """torch.load on a FIFO blocked for ever, and so did the rerun its error advised."""
     cfg = TrainConfig(algo="oappo", **SMALL)
-    path = tmp_path / "checkpoint.pt"
-    with contextlib.ExitStack() as stack:
-        if kind == "FIFO":
-            stack.enter_context(fifo(path))
-        elif kind == "socket":
-            stack.enter_context(unix_socket(path))
-        else:
-            path.mkdir()
-        what = {"FIFO": "a FIFO (named pipe)", "socket": "a socket", "folder": "a folder"}[kind]
+    what = NOT_A_FILE[kind]
+    with not_a_file(tmp_path / "checkpoint.pt", kind) as path:
         with pytest.raises(store.NotAFile, match=re.escape(f"checkpoint {path} is {what}, not a file; delete or move it")):
             train(cfg, tmp_path, progress=False)
         with pytest.raises(store.NotAFile, match=re.escape(f"checkpoint {path} is {what}")):

@@ -1,6 +1,5 @@
 """Bad input to the study and damaged run caches: a run file is checked when read, a library call
 with wrong input names it, a notebook parameter is checked in the first cell."""
-import contextlib
 import dataclasses
 import os
 import re
@@ -14,7 +13,7 @@ import pandas as pd
 import pytest
 
 import fakes
-from bad_input import SMALL, fifo, unix_socket
+from bad_input import NOT_A_FILE, SMALL, fifo, not_a_file
 from oapo_lite import store
 from oapo_lite.neural.config import TrainConfig
 from oapo_lite.neural.results import learning
@@ -281,14 +280,8 @@ def test_a_run_file_that_is_no_regular_file_is_named_and_never_opened(tmp_path, 
     (cfg,) = [c for _, c in figures.figure_runs("fig1", "smoke")]
     path = experiments.run_path(cfg, "smoke")
     path.parent.mkdir(parents=True)
-    what = {"FIFO": "a FIFO (named pipe)", "socket": "a socket", "link to a device": "a character device"}[kind]
-    with contextlib.ExitStack() as stack:
-        if kind == "FIFO":
-            stack.enter_context(fifo(path))
-        elif kind == "socket":
-            stack.enter_context(unix_socket(path))
-        else:
-            path.symlink_to("/dev/zero")
+    what = NOT_A_FILE[kind]
+    with not_a_file(path, kind):
         for call in (lambda: experiments.load_figure("fig1", "smoke"), lambda: experiments.missing_runs("fig1", "smoke"),
                      lambda: costs.plan("smoke", ["fig1"])):
             with pytest.raises(store.NotAFile, match=re.escape(f"run file {path} is {what}, not a file; delete or move")):
