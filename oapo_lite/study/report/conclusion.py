@@ -153,7 +153,7 @@ def dose(judged, figure: str) -> dict:
            and v.claim.curves[0] == "oappo gated"] if vs else []
     sigma = lambda v: float(next(kw for label, kw in get_figure(v.figure).curves if label == v.claim.curves[0])["sigma"])  # noqa: E731
     return {"verdicts": sorted(vs, key=sigma), "sigmas": sorted(sigma(v) for v in vs),
-            "selected": [sigma(v) for v in vs if v.held], "testable": [v for v in vs if v.status != Status.NOT_TESTABLE],
+            "selected": [sigma(v) for v in vs if v.held], "testable": [v for v in vs if v.estimates],
             "never_shut": sorted(sigma(v) for v in vs if v.reuse and v.reuse[0].never_shut == v.reuse[0].seeds)}
 
 
@@ -172,11 +172,18 @@ def smax_sentence(judged) -> str:
             f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
             + (f" (on 6h_vs_8z every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}, a ceiling)" if top else ""))
     if d["testable"]:
-        text += (f" and at {len(d['selected'])} of {len(d['sigmas'])} sigmas on 2s3z from "
-                 f"{d['sigmas'][0]:g} to {d['sigmas'][-1]:g}"
-                 + (f" (from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse)"
-                    if d["never_shut"] else ""))
+        text += " and " + dose_clause(d, "2s3z")
     return text + "."
+
+
+def dose_clause(d: dict, where: str) -> str:
+    """How many of a dose-response's sigmas selected (``dose``), on how many paired seeds, and
+    from which sigma up the gate never shut."""
+    seeds = min(v.estimates[0].seeds for v in d["testable"])
+    return (f"at {len(d['selected'])} of {len(d['sigmas'])} sigmas on {where} from {d['sigmas'][0]:g} to "
+            f"{d['sigmas'][-1]:g} ({seeds} paired seeds"
+            + (f"; from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse" if d["never_shut"]
+               else "") + ")")
 
 
 def _switch(judged) -> Verdict | None:
@@ -196,8 +203,8 @@ def mujoco_sentence(judged) -> str:
                  f"({gated.interval.point:+.0f}, {gated.higher_on} of {gated.seeds} seeds) only by turning reuse off")
     d = dose(judged, "fig_dose_mamujoco")
     if d["testable"]:
-        text += (f"; on Ant 4x2, where each leg's gate has three peers, a gate ended above both no reuse and always-on "
-                 f"reuse at {len(d['selected'])} of {len(d['sigmas'])} sigmas")
+        text += ("; where each leg's gate has three peers to choose between, a gate ended above both no reuse and "
+                 "always-on reuse " + dose_clause(d, "Ant 4x2"))
     return text + "."
 
 
