@@ -216,3 +216,20 @@ def test_notebook_05_uses_the_learner_internals_pinned_here_with_their_signature
     for module, names in NOTEBOOK_05_USES.items():
         for name, signature in names.items():
             assert str(inspect.signature(getattr(importlib.import_module(module), name))) == signature, (module, name)
+
+
+def test_the_overviews_package_table_names_every_module():
+    """Notebook 00's table of the package lists every module and subpackage that exists, so a
+    moved or new module cannot leave it stale."""
+    import re
+
+    import oapo_lite
+
+    overview = next(p for p in NOTEBOOKS if p.name == "00_overview.ipynb")
+    text = "".join(nbformat.read(overview, as_version=4).cells[0].source)
+    named = {part.removesuffix(".py") for t in re.findall(r"`([^`]+)`", text[text.index("| layer | module |"):])
+             for part in t.strip("/").split("/")}
+    root = Path(oapo_lite.__file__).parent
+    modules = {p.stem for p in root.rglob("*.py") if p.stem not in ("__init__", "__main__")}
+    packages = {p.parent.name for p in root.rglob("*/__init__.py")}
+    assert sorted((modules | packages) - named) == []

@@ -65,6 +65,10 @@ def test_glance_budgets_are_shares_of_the_paper():
     assert claims.budget_share("fig4_smax", "smax:3s5z_vs_3s6z") == "3M steps x 3 seeds = 15% of 20M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:MMM2_like_7m2M_vs_8m3M").startswith("not run at `cpu`")
     assert claims.budget_share("figA_mamujoco", None, "student").startswith("not run at `student`")
+    assert claims.budget_share("fig_dose_smax", "smax:2s3z") == "1M steps x 10 seeds = 20% of 5M (HARL's steps for the map)"
+    for figure in figures.FIGURES:  # a share is of a budget the figure names, never the default's steps
+        fig = figures.get_figure(figure)
+        assert not fig.reference or "paper" in fig.budgets, figure
     for figure, env in (("fig4_smax", "smax:9m"), ("fig3b", "nonexistent_map"), ("figA_mamujoco", "mamujoco:Nope-1x1")):
         with pytest.raises(ValueError, match=f"has no curve on env {env!r}"):  # a name that names nothing
             claims.budget_share(figure, env)
@@ -147,6 +151,18 @@ def test_the_conclusion_and_its_headlines_are_the_readmes():
     assert readme.block(conclusion.BEGIN, conclusion.END) == conclusion.opening(judged), \
         "the README's opening is stale: run python -m oapo_lite.study.report.conclusion"
     assert readme.block(*conclusion.HEADLINES) == conclusion.headlines(judged)
+
+
+def test_the_ablation_table_prints_every_estimate_a_verdict_read():
+    """A selection claim reads two intervals (against no reuse and against always-on) and holds
+    only if both do: its row prints both, so no verdict stands beside half of its evidence."""
+    from oapo_lite.study.report import conclusion
+
+    judged = verdicts.glance()
+    table = conclusion.ablation_table(judged)
+    both = table["claim"].str.contains("before both|ends above both")
+    assert both.any() and (table.loc[both, "estimate"].str.count("vs ") == 2).all()
+    assert (table.loc[~both, "estimate"].str.count("vs ") <= 1).all()
 
 
 def test_the_opening_counts_what_an_interval_decided_and_the_layouts_runs():

@@ -37,6 +37,16 @@ def test_a_plan_prices_what_would_train_and_trains_and_writes_nothing(tmp_path, 
     assert "a test CPU (2 cores)" in out and sorted(tmp_path.rglob("*")) == before
 
 
+def test_a_plan_for_some_envs_prices_only_their_runs():
+    """What the opening says the never-run envs cost: the plan of their runs alone."""
+    env = "smax:MMM2_like_7m2M_vs_8m3M"
+    (fig,), total, _ = costs.plan("paper", ["fig4_smax"], from_nothing=True, envs={env})
+    (whole,), _, _ = costs.plan("paper", ["fig4_smax"], from_nothing=True)
+    runs = [r for r in figures.runs_of("fig4_smax", "paper") if r.cfg.env == env]
+    assert (fig.runs, fig.steps, total.runs) == (len(runs), sum(r.cfg.steps for r in runs), len(runs))
+    assert 0 < fig.runs < whole.runs and fig.cpu_hours < whole.cpu_hours
+
+
 def test_runs_with_a_record_price_their_key_by_the_median_and_unmeasured_runs_not_at_all():
     cfg = TrainConfig(algo="happo", steps=2000, n_envs=8, rollout_len=25)
     measured = [pd.DataFrame({"step": [0, 2000], "cpu_s": [0.1, cpu]}) for cpu in (1.0, 3.0, 5.0)]

@@ -61,6 +61,8 @@ def budget_share(figure, env: str | None, budget: str = "cpu", on_disk: int | No
     whose steps those are; the mazes: ours, the paper gives none)."""
     fig = get_figure(figure)
     grid.get_budget(budget)
+    if fig.reference and "paper" not in fig.budgets:  # the default `paper` budget is no one's steps
+        raise ValueError(f"{fig.id} names the paper's steps ({fig.reference}) but has no `paper` budget of its own")
     envs = {kw.get("env", fig.common.get("env")) for _, kw in fig.curves} | {fig.common.get("env")}
     env = env or fig.common.get("env")
     if env not in envs:

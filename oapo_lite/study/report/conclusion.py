@@ -14,7 +14,7 @@ from oapo_lite.study.catalogue.figures import get_figure
 from oapo_lite.study.catalogue.figures.layouts import CURVES
 from oapo_lite.study.judge import verdicts
 from oapo_lite.study.judge.evidence import Evidence
-from oapo_lite.study.judge.records import DECIDED, Status, Verdict
+from oapo_lite.study.judge.records import DECIDED, MECHANISM, Status, Verdict
 from oapo_lite.study.report import claims, words
 from oapo_lite.study.runs import costs, experiments, readme
 from oapo_lite.study.studies import layout_study, selection
@@ -66,15 +66,19 @@ def ceiling(figure: str, env: str | None = None) -> tuple[float, float] | None:
 
 def ablation_table(judged: list[verdicts.Judged]) -> pd.DataFrame:
     """The seed-paired ablation and the dose-response, one row per claim: env, the comparison,
-    the verdict, the estimate its interval read (two decimals), and whether one seed carries it."""
+    the verdict, each estimate its interval read against its curve (``words.short``; a selection
+    claim reads two, one per end, and both must hold), and whether one seed carries it."""
     rows = []
     for figure in ABLATION + DOSE:
         for v in _figure(judged, figure):
-            e = v.estimates[0] if v.estimates else None
+            read = v.estimates[:2] if v.claim.kind.statistic == "selection" else v.estimates[:1]
             rows.append({"env": env_name(v), "claim": v.claim.text, "verdict": v.status.value,
-                         "estimate": "-" if e is None else f"{e.interval.point:.2f} [{e.interval.low:.2f}, "
-                                                            f"{e.interval.high:.2f}]",
-                         "seeds": words.seeds(v) if v.robustness else "-"})
+                         "estimate": "; ".join(
+                             f"vs {e.curves[1]}: {words.short(e.interval)}"
+                             + ("" if e.higher_on is None else f", higher on {e.higher_on} of {e.seeds}")
+                             for e in read) or "-",
+                         "seeds": f"{len(v.robustness.seeds)}" + ("; " + words.robustness(v) if v.one_seed else "")
+                         if v.robustness else "-"})
     return pd.DataFrame(rows)
 
 
@@ -139,8 +143,9 @@ def _smax(judged) -> dict:
 
 def _share(figure: str) -> str:
     fig = get_figure(figure)
-    shares = [fig.budget("cpu", env).steps / fig.budget("paper", env).steps for env in fig.envs("cpu")]
-    return f"{100 * min(shares):.3g}-{100 * max(shares):.3g}%"
+    shares = [fig.budget("cpu", env).steps / fig.budget("paper", env).steps for env in fig.envs("cpu") or (None,)]
+    low, high = (f"{100 * x:.3g}" for x in (min(shares), max(shares)))
+    return f"{low}%" if low == high else f"{low}-{high}%"
 
 
 def dose(judged, figure: str) -> dict:
@@ -157,6 +162,14 @@ def dose(judged, figure: str) -> dict:
             "never_shut": sorted(sigma(v) for v in vs if v.reuse and v.reuse[0].never_shut == v.reuse[0].seeds)}
 
 
+def on_seeds(v: Verdict) -> str:
+    """A verdict in a clause: its env, status, seeds and final values, and whether one seed carries it."""
+    finals = " against ".join(f"{level.curve} {level.interval.point:.2f}" for level in v.levels if level.stat == "final")
+    return (f"{env_name(v)}: {v.status} on {len(v.robustness.seeds)} seeds, {finals}"
+            + (f", reusing across networks at {v.reuse[0].overall:.0%} of its evaluations" if v.status in MECHANISM
+               else ", resting on one seed" if v.robustness.one_seed else ""))
+
+
 def smax_sentence(judged) -> str:
     s = _smax(judged)
     ablation = _figure(judged, "fig_selection_smax")
@@ -166,8 +179,8 @@ def smax_sentence(judged) -> str:
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
             f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps an interval decided "
-            f"({len(s['contradicted'])} contradicted), because plain parameter sharing is strong there (MAPPO ended at or "
-            f"above HAPPO on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
+            f"({'; '.join(on_seeds(v) for v in s['heads'] if v.levels)}), because plain parameter sharing is strong "
+            f"there (MAPPO ended at or above HAPPO on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
             + (", ".join(env_name(v) for v in reuse) or "no map") + ", but a KL gate ended above both no reuse and "
             f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
             + (f" (on 6h_vs_8z every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}, a ceiling)" if top else ""))
@@ -193,8 +206,14 @@ def _switch(judged) -> Verdict | None:
 def mujoco_sentence(judged) -> str:
     head = next(v for j, v in headline_verdicts(judged) if j.figure.id == "figA_mamujoco")
     v = _switch(judged)
-    text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3), the paper's claim that OAPPO ends above no reuse is "
-            f"{head.status} (IQM of {head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)})")
+    degrade = [v for v in _figure(judged, "figA_mamujoco") if v.claim.curves[0] == "happo"]
+    text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3, at {_share('figA_mamujoco')} of HARL's steps), the paper's "
+            "claim that direct experience reuse degrades performance is "
+            + " and ".join(f"{v.status} for {v.claim.curves[1].upper()} on {len(v.robustness.seeds)} seeds "
+                           f"({'; '.join(words.estimate(e) for e in v.estimates)}"
+                           f"{', resting on one seed' if v.robustness.one_seed else ''})" for v in degrade)
+            + f", and its claim that OAPPO ends above no reuse is {head.status} (IQM of {head.estimates[0].seeds} paired "
+            f"differences {words.short(head.estimates[0].interval)})")
     if v is not None and v.status == Status.NO_SELECTION:
         gated, always = v.estimates[1], v.estimates[2]
         text += (f": reuse across the two legs lowered the return (always-on minus HAPPO {always.interval.point:+.0f} "
@@ -221,9 +240,12 @@ def unrun_sentence(judged) -> str:
         by.setdefault(j.figure.id, []).append(env_name(j.lead))
     parts = [f"Section {fig.section}'s {KINDS.get(fig.id, 'envs')} {', '.join(dict.fromkeys(envs))} (notebook "
              f"{fig.notebook[:2]})" for fig, envs in ((get_figure(f), envs) for f, envs in by.items())]
-    hours = sum(costs.plan("paper", figures=(f,), from_nothing=True)[0][0].cpu_hours for f in by)
-    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need about {hours:,.0f} CPU hours (priced runs "
-            "only), a cluster's job; the table below says claim by claim what held.")
+    priced = [costs.plan("paper", figures=(f,), from_nothing=True, envs={j.lead.claim.env for j in never})[0][0]
+              for f in by]
+    hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
+    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need about {hours:,.0f} CPU hours"
+            + (f" ({unpriced} of {sum(p.runs for p in priced)} runs have no price yet and are left out)" if unpriced
+               else "") + ", a cluster's job; the table below says claim by claim what held.")
 
 
 def opening(judged: list[verdicts.Judged] | None = None) -> str:
@@ -270,8 +292,11 @@ def cost_sentence() -> str:
             paid = [label for label, r in rows if r["side_by_side"] and r["cpu_s"] < part.loc["happo", "cpu_s"]]
             parts.append(f"{env.partition(':')[2]} (to {level.reach.format(level.threshold)}): HAPPO "
                          f"{part.loc['happo', 'cpu_s']:.0f}, " + ", ".join(said) + " CPU seconds; reuse "
-                         + (f"paid for its compute with {', '.join(paid)}" if paid else "did not pay for its compute"))
-    return ("What reuse costs, from the runs' own records: " + "; ".join(parts) + ".") if parts else ""
+                         + (f"reached it on less compute than HAPPO with {', '.join(paid)}" if paid
+                            else "reached it on no less compute than HAPPO"))
+    return ("What reuse costs, from the runs' own records (the median over seeds of the CPU seconds spent when a "
+            "curve's IQM first reached the level; without an interval, a reading rather than a verdict): "
+            + "; ".join(parts) + ".") if parts else ""
 
 
 THEORY = (

@@ -83,15 +83,16 @@ class Line:
 
 
 def plan(budget: str, figures=FIGURES, workers: int = 2,
-         from_nothing: bool = False) -> tuple[list[Line], Line, float]:
+         from_nothing: bool = False, envs=None) -> tuple[list[Line], Line, float]:
     """Per figure and in total (every distinct run once): runs, env steps, on disk, to train and
     its CPU hours; and the wall hours of the runs to train on ``workers`` processes, as
-    ``run_all`` orders them. ``from_nothing``: as if no run were on disk (what the budget costs).
-    Reads only."""
+    ``run_all`` orders them. ``from_nothing``: as if no run were on disk (what the budget costs);
+    ``envs``: only these envs' runs (all: None). Reads only."""
     from_nothing, workers = boolean(from_nothing, "from_nothing"), cli.workers(workers, "workers")
     prices = table()
     on_disk, finished = {}, []
-    runs = experiments.grid_runs(budget, figures)
+    keep = lambda these: [r for r in these if envs is None or r.cfg.env in envs]  # noqa: E731
+    runs = keep(experiments.grid_runs(budget, figures))
     for run in runs:
         try:
             finished.append((run.cfg, experiments.read_run(run.cfg, budget)))
@@ -109,7 +110,7 @@ def plan(budget: str, figures=FIGURES, workers: int = 2,
                     sum(run_cpu_seconds(r.cfg, prices) for r in priced) / 3600, len(todo) - len(priced),
                     " + ".join(sources) or ("-" if not todo else "none"))
 
-    lines = [line(f, runs_of(f, budget)) for f in figures]  # a run of two figures is in both
+    lines = [line(f, keep(runs_of(f, budget))) for f in figures]  # a run of two figures is in both
     total = line("total", runs)
     todo = [r for r in runs if not on_disk[r.cfg.run_id()] and cost_key(r.cfg) in prices]
     return lines, total, wall_hours(todo, prices, workers)

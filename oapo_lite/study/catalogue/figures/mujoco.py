@@ -120,7 +120,8 @@ FIGURES = (
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on Ant 4x2, seeds 10-19
     Figure("fig_dose_mamujoco", dose_curves(ANT, tuple(ANT_DOSE_SIGMA.values()), ANT_LEARNER),
-           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS)},
+           common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS),
+                                                                          "paper": HARL_SCALE},
            metric=ANT_RETURN, claims=tuple(dose_claims(tuple(ANT_DOSE_SIGMA.values()), "Ant 4x2", ANT_RETURN)),
            section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # the normalisation rule's choice held out: both learners on the ablation's seeds 10-19 (the

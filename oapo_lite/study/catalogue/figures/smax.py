@@ -145,7 +145,7 @@ FIGURES = (
     # with the selection ablation (its HAPPO, always-on and median-sigma runs are these)
     Figure("fig_dose_smax", dose_curves(DOSE_SMAX, tuple(DOSE_SIGMA.values()), tuned("happo")),
            common=dict(SMAX_BATCH, **SMAX_TUNED), runs_at=("cpu",), budgets={
-               "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64)},
+               "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64), "paper": HARL_STEPS},
            metric=SPEED_WIN_RATE, claims=tuple(dose_claims(tuple(s for q, s in DOSE_SIGMA.items() if q != 0.5),
                                                      DOSE_SMAX.removeprefix("smax:"), SPEED_WIN_RATE)),
            section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
