@@ -118,16 +118,16 @@ def _maze(judged) -> dict:
 
 def maze_sentence(judged) -> str:
     m = _maze(judged)
-    faster, below = m["faster"], m["below"]
-    b = lambda label: f"{int(below.loc[label, 'below'])} of {int(below.loc[label, 'runs'])}"
-    lean = ", ".join(f"lambda = {CURVES[c]['reuse_lambda']:g}: {b(c)}" for c in LEAN if c in below.index)
+    faster, below = m["faster"].lead, m["below"]
+    b = lambda label: f"{int(below.loc[label, 'below'])} of {int(below.loc[label, 'runs'])}"  # noqa: E731
+    lean = ", ".join(f"{b(c)} at lambda = {CURVES[c]['reuse_lambda']:g}" for c in LEAN if c in below.index)
     balance = m["balance"]
-    return (f"On the mazes (Section 6.1), the paper's claim that OAPPO converges faster than HAPPO is "
-            f"{faster.lead.status} on {len(faster.lead.robustness.seeds)} seeds ({words.lead_estimate(faster.lead)}), "
-            f"and reuse is why: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the optimum on "
-            f"{b('oappo')} runs against HAPPO's {b('happo')}, because a moderate share of the peer's experience carried "
-            f"the runs HAPPO lost to exploration, while leaning on the peer trapped them ({lean} runs below 95%), so the "
-            f"paper's \"lambda = 0.4 strikes a balance\" is {balance.status} here ({words.lead_estimate(balance)}).")
+    return (f"On the mazes (Section 6.1), the paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
+            f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}), and reuse "
+            f"is why: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the optimum on {b('oappo')} "
+            f"runs against HAPPO's {b('happo')} (a moderate share of the peer's experience carried the runs HAPPO lost "
+            f"to exploration), while leaning on the peer trapped them ({lean}), so the paper's \"lambda = 0.4 strikes "
+            f"a balance\" is {balance.status} here.")
 
 
 def _smax(judged) -> dict:
@@ -143,22 +143,40 @@ def _share(figure: str) -> str:
     return f"{100 * min(shares):.3g}-{100 * max(shares):.3g}%"
 
 
+def dose(judged, figure: str) -> dict:
+    """A dose-response's selection verdicts on the final value, with the ablation's median-sigma
+    verdict beside them (the dose figure leaves it to the ablation): the sigmas that selected, and
+    those whose gate never shut on any seed (their runs are always-on reuse)."""
+    vs = [v for v in _figure(judged, figure) if v.claim.test == "selects"]
+    env = get_figure(figure).curves[0][1].get("env") or get_figure(figure).common.get("env")
+    vs += [v for f in ABLATION for v in _figure(judged, f) if v.claim.test == "selects" and env_name(v) == env_name(vs[0])
+           and v.claim.curves[0] == "oappo gated"] if vs else []
+    sigma = lambda v: float(next(kw for label, kw in get_figure(v.figure).curves if label == v.claim.curves[0])["sigma"])  # noqa: E731
+    return {"verdicts": sorted(vs, key=sigma), "sigmas": sorted(sigma(v) for v in vs),
+            "selected": [sigma(v) for v in vs if v.held], "testable": [v for v in vs if v.status != Status.NOT_TESTABLE],
+            "never_shut": sorted(sigma(v) for v in vs if v.reuse and v.reuse[0].never_shut == v.reuse[0].seeds)}
+
+
 def smax_sentence(judged) -> str:
     s = _smax(judged)
-    ends = {env_name(v): v for v in _figure(judged, "fig_selection_smax") if v.claim.test == "selects"}
-    chosen = [e for e, v in ends.items() if v.held]
+    ablation = _figure(judged, "fig_selection_smax")
+    ends = {env_name(v): v for v in ablation if v.claim.test == "selects"}
+    reuse = [v for v in ablation if v.claim.test == "paired_higher" and v.claim.curves[0] == "oappo always" and v.held]
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
-    reuse = [v for v in _figure(judged, "fig_selection_smax")
-             if v.claim.test == "paired_higher" and "always-on" in v.claim.text and v.held]
-    return (f"On SMAX (Section 6.2, {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
-            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps where an interval "
-            f"decided it ({len(s['contradicted'])} contradicted, {len(s['heads']) - len(s['decided'])} undecided or not "
-            f"run), because plain parameter sharing is strong there; in the seed-paired ablation reuse across "
-            f"networks ended above no reuse on {len(reuse)} map{'s' * (len(reuse) != 1)} ("
-            + ", ".join(env_name(v) for v in reuse) + "), but a KL gate ended above both no reuse and "
-            f"always-on reuse on {len(chosen)} of {len(ends)} maps"
-            + (f", and 6h_vs_8z cannot tell them apart: every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}."
-               if top else "."))
+    d = dose(judged, "fig_dose_smax")
+    text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
+            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps an interval decided "
+            f"({len(s['contradicted'])} contradicted), because plain parameter sharing is strong there (MAPPO ended at or "
+            f"above HAPPO on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
+            + (", ".join(env_name(v) for v in reuse) or "no map") + ", but a KL gate ended above both no reuse and "
+            f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
+            + (f" (on 6h_vs_8z every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}, a ceiling)" if top else ""))
+    if d["testable"]:
+        text += (f" and at {len(d['selected'])} of {len(d['sigmas'])} sigmas on 2s3z from "
+                 f"{d['sigmas'][0]:g} to {d['sigmas'][-1]:g}"
+                 + (f" (from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse)"
+                    if d["never_shut"] else ""))
+    return text + "."
 
 
 def _switch(judged) -> Verdict | None:
@@ -169,15 +187,18 @@ def mujoco_sentence(judged) -> str:
     head = next(v for j, v in headline_verdicts(judged) if j.figure.id == "figA_mamujoco")
     v = _switch(judged)
     text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3), the paper's claim that OAPPO ends above no reuse is "
-            f"{head.status} ({words.lead_estimate(head)})")
-    if v is None or v.status != Status.NO_SELECTION:
-        return text + "."
-    gated, always = v.estimates[1], v.estimates[2]
-    r = v.reuse[0]
-    return (text + f", because reuse across the two legs lowered the return (always-on minus HAPPO "
-            f"{always.interval.point:+.0f}, IQM of {always.seeds} paired seeds) and with one peer the gate is a switch "
-            f"that shut for good by {r.last_open:,.0f} steps on every seed: it beat always-on reuse "
-            f"({gated.interval.point:+.0f} on {gated.higher_on} of {gated.seeds} seeds) only by turning reuse off.")
+            f"{head.status} (IQM of {head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)})")
+    if v is not None and v.status == Status.NO_SELECTION:
+        gated, always = v.estimates[1], v.estimates[2]
+        text += (f": reuse across the two legs lowered the return (always-on minus HAPPO {always.interval.point:+.0f} "
+                 f"over {always.seeds} paired seeds), and with one peer the gate is a switch that shut for good by "
+                 f"{v.reuse[0].last_open / 1e3:,.0f}k steps on every seed, beating always-on reuse "
+                 f"({gated.interval.point:+.0f}, {gated.higher_on} of {gated.seeds} seeds) only by turning reuse off")
+    d = dose(judged, "fig_dose_mamujoco")
+    if d["testable"]:
+        text += (f"; on Ant 4x2, where each leg's gate has three peers, a gate ended above both no reuse and always-on "
+                 f"reuse at {len(d['selected'])} of {len(d['sigmas'])} sigmas")
+    return text + "."
 
 
 # what a figure's envs are, in the paper's words (a sentence names them with these)

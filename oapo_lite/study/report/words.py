@@ -17,6 +17,12 @@ def steps(n: float) -> str:
     return f"{n / 1e6:g}M" if n >= 1e6 else f"{n / 1e3:g}k"
 
 
+def short(i) -> str:
+    """An interval in few digits, for a sentence: two decimals, or none for numbers of 10 and more."""
+    spec = ".0f" if max(abs(i.point), abs(i.low), abs(i.high)) >= 10 else ".2f"
+    return i.fmt(spec)
+
+
 def estimate(e: Estimate) -> str:
     """An interval estimate with its name: "P(oappo faster) 0.740 [0.360, 1.000]"."""
     i = e.interval.fmt()
