@@ -14,9 +14,11 @@ def test_the_committed_sigma_is_what_the_rule_gives_from_the_committed_runs(env,
     assert figures.SELECTION_SIGMA[env, reading] == selection.gate_sigma(env, reading)
 
 
-@pytest.mark.parametrize("quantile", list(figures.smax.DOSE_SIGMA))
-def test_the_dose_sigmas_are_the_rules_quantiles_of_the_committed_runs(quantile):
-    assert figures.smax.DOSE_SIGMA[quantile] == selection.gate_sigma(figures.smax.DOSE_SMAX, "agent", quantile)
+@pytest.mark.parametrize("env, sigmas", [(figures.smax.DOSE_SMAX, figures.smax.DOSE_SIGMA),
+                                          (figures.mujoco.ANT, figures.mujoco.ANT_DOSE_SIGMA)])
+def test_the_dose_sigmas_are_the_rules_quantiles_of_the_committed_runs(env, sigmas):
+    assert list(sigmas) == list(figures.readings.DOSE_QUANTILES)
+    assert sigmas == {q: selection.gate_sigma(env, "agent", q) for q in sigmas}
 
 
 def test_the_dose_response_shares_the_ablations_runs_at_its_ends():

@@ -24,9 +24,11 @@ PALETTE = {
     # within its type only
     "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#dd3497", "oappo type own type": "#f768a1",
     "oappo gated sampled": "#7b6888", "oappo always sampled": "#e7cb94",
-    # the dose-response on 2s3z: the gate at sigma from tight (darker) to loose (lighter), between
-    # no reuse (HAPPO) and always-on; its median sigma is the ablation's gated curve (``ALIASES``)
-    "oappo sigma=0.035": "#00441b", "oappo sigma=0.34": "#78c679", "oappo sigma=0.81": "#addd8e",
+    # the dose-responses on 2s3z and Ant 4x2: the gate at sigma from tight (darker) to loose
+    # (lighter), between no reuse (HAPPO) and always-on; a median sigma of 0.046 is the gated
+    # curve's colour (``ALIASES``)
+    "oappo sigma=0.031": "#002a10", "oappo sigma=0.035": "#00441b", "oappo sigma=0.077": "#238b45",
+    "oappo sigma=0.11": "#74c476", "oappo sigma=0.34": "#78c679", "oappo sigma=0.81": "#addd8e",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",
     "oappo entropy x W[i,i]": "#cedb9c",

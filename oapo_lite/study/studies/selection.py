@@ -33,7 +33,7 @@ RULE_RUNS = {("smax:2s3z", "agent"): ("fig4_smax", "oappo", (0, 1, 2, 3, 4)),
              ("smax:2s3z", "type"): ("fig4_smax", "oappo type", (0, 1, 2, 3, 4)),
              (figures.mujoco.HALFCHEETAH, "agent"): ("fig_selection_mamujoco", "oappo always",
                                                      figures.readings.SELECTION_SEEDS),
-             (figures.mujoco.ANT, "agent"): ("fig_dose_mamujoco", "oappo always", figures.readings.SELECTION_SEEDS)}
+             (figures.mujoco.ANT, "agent"): ("fig_ant_learner", "oappo always", (0, 1, 2))}
 
 
 def across_pairs(kl: np.ndarray, owner) -> np.ndarray:

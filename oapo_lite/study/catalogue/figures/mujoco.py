@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from oapo_lite.study.catalogue.figures.readings import (READING_NAMES, SELECTION_SEEDS, dose_claims, dose_curves,
-                                                        reading_curves, selection_claims, selection_curves, sigma_on)
+from oapo_lite.study.catalogue.figures.readings import (DOSE_QUANTILES, READING_NAMES, SELECTION_SEEDS, dose_claims,
+                                                        dose_curves, reading_curves, selection_claims, selection_curves, sigma_on)
 from oapo_lite.study.catalogue.grid import ENGINE_BUDGETS, At, Figure
 from oapo_lite.study.catalogue.metrics import RETURN, Metric
 from oapo_lite.study.catalogue.tests import Claim
@@ -47,9 +47,9 @@ ANT_LEARNER = FIGA_CURVES["happo"]
 # its return with a level to reach, fixed from those seeds before any test seed ran: a round
 # number below HAPPO's final there
 ANT_RETURN = Metric(RETURN.column, 500.0, RETURN.floor, RETURN.reach, RETURN.final, RETURN.tail)
-# the dose-response's sigmas on Ant, by the rule's quantiles of the always-on runs' K
-# (``selection.gate_sigma``), read once those runs are on disk and before any gated run
-ANT_DOSE_SIGMA: dict = {}
+# the dose-response's sigmas on Ant, by the rule's quantiles of the always-on runs' K on seeds
+# 0-2 (``selection.gate_sigma``), read once those runs were on disk and before any gated run
+ANT_DOSE_SIGMA = dict(zip(DOSE_QUANTILES, (0.031, 0.046, 0.077, 0.11)))
 
 # HARL's MaMuJoCo scale: App. A's ``paper`` budget, and the reference its ``cpu`` budgets are a share of
 HARL_SCALE = At(steps=10_000_000, eval_every=25, eval_episodes=10,
@@ -113,9 +113,10 @@ FIGURES = (
            common=dict(env=HALFCHEETAH, ppo_epochs=15), runs_at=("smoke", "cpu"), budgets={
                "smoke": MAMUJOCO_SMOKE, "cpu": APPA_CPU},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
-    # the learner on Ant 4x2, by ``fig_mamujoco_normalize``'s rule (the higher final IQM), on
-    # seeds 0-2, which the dose-response does not test on
-    Figure("fig_ant_learner", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),
+    # the learner on Ant 4x2, by ``fig_mamujoco_normalize``'s rule (the higher final IQM), and the
+    # always-on runs whose K the sigma rule reads: seeds 0-2, which the dose-response does not test on
+    Figure("fig_ant_learner", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER),
+                               ("oappo always", dict(dose_curves(ANT, (), ANT_LEARNER))["oappo always"])),
            common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": MUJOCO_1M},
            metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
     # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on Ant 4x2, seeds 10-19
