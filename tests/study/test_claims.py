@@ -65,7 +65,10 @@ def test_glance_budgets_are_shares_of_the_paper():
     assert claims.budget_share("fig4_smax", "smax:3s5z_vs_3s6z") == "3M steps x 3 seeds = 15% of 20M (HARL's steps for the map)"
     assert claims.budget_share("fig4_smax", "smax:MMM2_like_7m2M_vs_8m3M").startswith("not run at `cpu`")
     assert claims.budget_share("figA_mamujoco", None, "student").startswith("not run at `student`")
-    assert claims.budget_share("fig_dose_smax", "smax:2s3z") == "1M steps x 10 seeds = 20% of 5M (HARL's steps for the map)"
+    for env in ("smax:2s3z", None):  # a figure on one env needs no env named: its claims name none
+        assert claims.budget_share("fig_dose_smax", env) == "1M steps x 10 seeds = 20% of 5M (HARL's steps for the map)"
+    with pytest.raises(ValueError, match="differs by env: name one of"):  # which of its maps' steps?
+        claims.budget_share("fig_selection_smax", None)
     for figure in figures.FIGURES:  # a share is of a budget the figure names, never the default's steps
         fig = figures.get_figure(figure)
         assert not fig.reference or "paper" in fig.budgets, figure

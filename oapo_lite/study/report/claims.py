@@ -64,7 +64,10 @@ def budget_share(figure, env: str | None, budget: str = "cpu", on_disk: int | No
     if fig.reference and "paper" not in fig.budgets:  # the default `paper` budget is no one's steps
         raise ValueError(f"{fig.id} names the paper's steps ({fig.reference}) but has no `paper` budget of its own")
     envs = {kw.get("env", fig.common.get("env")) for _, kw in fig.curves} | {fig.common.get("env")}
-    env = env or fig.common.get("env")
+    named = {e for e in envs if e}
+    env = env or fig.common.get("env") or (next(iter(named)) if len(named) == 1 else None)
+    if env is None and "paper" in fig.budgets and fig.budgets["paper"].envs:
+        raise ValueError(f"{fig.id}'s `paper` budget differs by env: name one of {sorted(named)}")
     if env not in envs:
         raise ValueError(f"{fig.id} has no curve on env {env!r}; its envs are {sorted(e for e in envs if e)}")
     if not fig.runs(budget) or (fig.envs(budget) is not None and env not in fig.envs(budget)):
