@@ -245,7 +245,22 @@ def unrun_sentence(judged) -> str:
     hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
     return (f"Never run: {'; '.join(parts)}: their `paper` budgets need about {hours:,.0f} CPU hours"
             + (f" ({unpriced} of {sum(p.runs for p in priced)} runs have no price yet and are left out)" if unpriced
-               else "") + ", a cluster's job; the table below says claim by claim what held.")
+               else "") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
+
+
+def untested_clause(judged) -> str:
+    """The figures' envs that ran and whose every claim found a curve that did not learn."""
+    by = {}
+    for j in judged:
+        if j.figure.id in KINDS:
+            by.setdefault((j.figure.id, j.lead.claim.env), []).append(j)
+    idle = [(f, js) for (f, env), js in by.items() if all(j.lead.status == Status.NOT_TESTABLE and j.lead.gap.kind ==
+                                                           "learned" for j in js)]
+    return "".join(
+        f"; Section {js[0].lead.section}'s {env_name(js[0].lead)} ran at "
+        f"{claims.budget_share(f, js[0].lead.claim.env, js[0].budget, js[0].seeds_on_disk)} and tested nothing: "
+        + " and ".join(sorted({n.curve for j in js for n in j.lead.gap.not_learned})) + " did not learn"
+        for f, js in idle)
 
 
 def opening(judged: list[verdicts.Judged] | None = None) -> str:
