@@ -449,6 +449,26 @@ def test_a_head_that_never_answers_is_named_with_the_wait(monkeypatch):
         executors.reach("10.0.0.1:6379", deadline=2)
 
 
+def test_a_port_that_takes_the_connection_and_says_nothing_is_no_ray_head():
+    """A proxy or another server may accept TCP and then stay silent: Ray's client retried that for
+    30 s and said "ray client connection timeout"; the handshake check names the address."""
+    import socket
+    import threading
+
+    from oapo_lite.study.runs import executors
+
+    server = socket.create_server(("127.0.0.1", 0))
+    accepted = []
+    threading.Thread(target=lambda: accepted.append(server.accept()), daemon=True).start()
+    address = f"ray://127.0.0.1:{server.getsockname()[1]}"
+    start = time.monotonic()
+    with pytest.raises(ConnectionError, match=rf"no Ray cluster answered at '{address}' within 2 s: the port takes "
+                                              "connections but gives no gRPC handshake"):
+        executors.reach(address, deadline=2)
+    assert time.monotonic() - start < 10
+    server.close()
+
+
 # ---------------------------------------------------------------- issue 53: a path the system refuses
 
 

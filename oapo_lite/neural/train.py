@@ -63,6 +63,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = True, progress: 
         tensorboard = writable_folder(str(tensorboard), "train's tensorboard")
     if callback is not None and not callable(callback):
         raise TypeError(f"train's callback must be None or callable with an iteration's metrics, got {callback!r}")
+    if timing is not None and not isinstance(timing, dict):
+        raise TypeError(f"train's timing must be None or a dict to fill with seconds per phase, got {timing!r}")
     if observer is not None and not (callable(observer) and set(getattr(observer, "wants", ())) <= WANTS.keys()):
         raise TypeError(f"train's observer must be callable with a wants set within {sorted(WANTS)}, got "
                         f"{observer!r}")

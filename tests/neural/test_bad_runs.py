@@ -294,6 +294,7 @@ def test_a_fifo_checkpoint_is_one_line_on_the_command_line(tmp_path, capsys):
 @pytest.mark.parametrize("kw, error, words", [
     (dict(callback="x"), TypeError, "train's callback must be None or callable with an iteration's metrics, got 'x'"),
     (dict(callback=5), TypeError, "train's callback must be None or callable"),
+    (dict(timing=[]), TypeError, "train's timing must be None or a dict to fill with seconds per phase, got []"),
     (dict(tensorboard="/proc/x"), ValueError, "train's tensorboard '/proc/x' cannot be written (no such file or folder)"),
     (dict(tensorboard="a_file"), ValueError, "train's tensorboard 'a_file' is a file; allowed: a folder"),
     (dict(tensorboard="loop/x"), ValueError, "train's tensorboard 'loop/x' cannot be used: it runs through a loop"),

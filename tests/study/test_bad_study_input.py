@@ -40,6 +40,8 @@ def _cache(tmp_path, monkeypatch):
     (lambda df, p: df.assign(step=df["step"].where(df.index != 1)).to_csv(p, index=False), "evaluation steps"),
     (lambda df, p: df.drop(columns="eval_return").to_csv(p, index=False), r"lacks the columns \['eval_return'\]"),
     (lambda df, p: df.assign(seed=7).to_csv(p, index=False), "another run's rows"),
+    (lambda df, p: df.assign(**{"step.1": df["step"]}).to_csv(p, index=False, header=[*df.columns, "step"]),
+     r"names the columns \['step'\] twice in its header"),
 ])
 def test_the_run_cache_is_checked_when_read_and_a_damaged_run_is_trained_again(tmp_path, monkeypatch, capsys,
                                                                               damage, words):

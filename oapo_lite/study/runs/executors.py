@@ -19,6 +19,7 @@ import tempfile
 import threading
 import time
 import traceback
+import warnings
 from multiprocessing.connection import wait
 from pathlib import Path
 
@@ -216,6 +217,7 @@ def reach(address: str, deadline: float = CONNECT_S) -> None:
     the address, the wait and the cause (no such host, refused, no answer): Ray itself retries an
     address that nothing answers at for many minutes (seen: 580 s and counting)."""
     host, port = address.removeprefix("ray://").rsplit(":", 1)
+    start = time.monotonic()
     try:
         socket.create_connection((host, int(port)), timeout=deadline).close()
     except socket.gaierror as err:
@@ -228,6 +230,20 @@ def reach(address: str, deadline: float = CONNECT_S) -> None:
         raise ConnectionError(f"no Ray cluster at {address!r}: {str(err.strerror or err).lower()} (a connection waits "
                               f"at most {deadline:g} s); start one there (ray start --head) or check the address "
                               "(--address)") from None
+    # A port can take the connection and then say nothing (a proxy, another kind of server): a Ray
+    # head (its GCS, or its client server for ray://) answers gRPC's handshake, and Ray's client
+    # would retry the silence for 30 s and then name no address
+    import grpc
+
+    channel = grpc.insecure_channel(f"{host}:{port}")
+    try:
+        grpc.channel_ready_future(channel).result(timeout=max(0.1, deadline - (time.monotonic() - start)))
+    except grpc.FutureTimeoutError:
+        raise ConnectionError(f"no Ray cluster answered at {address!r} within {deadline:g} s: the port takes connections "
+                              "but gives no gRPC handshake; start one there (ray start --head) or check the address "
+                              "(--address)") from None
+    finally:
+        channel.close()
 
 
 def connect(address: str | None, attempts: int = 3, **init_kwargs):
@@ -261,8 +277,14 @@ def connect(address: str | None, attempts: int = 3, **init_kwargs):
         # this connection only: a private cluster's start reads the variable too)
         given = os.environ.get("RAY_gcs_server_port_wait_time_s")
         os.environ["RAY_gcs_server_port_wait_time_s"] = given or str(CONNECT_S)
+        start = time.monotonic()
         try:
-            ray.init(address=address, **init_kwargs)
+            with warnings.catch_warnings():  # the client's timeout warning: the error below says it in one line
+                warnings.simplefilter("ignore", UserWarning)
+                ray.init(address=address, **init_kwargs)
+        except ConnectionError as err:  # Ray's own words name no address ("ray client connection timeout")
+            raise ConnectionError(f"no Ray cluster answered at {address!r}: {err} after {time.monotonic() - start:.0f} s "
+                                  "(the port answers, but not as a Ray head); check the address (--address)") from None
         finally:
             if given is None:
                 del os.environ["RAY_gcs_server_port_wait_time_s"]

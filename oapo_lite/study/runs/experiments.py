@@ -10,6 +10,8 @@ row belongs to. What the runs are is the grid's (``figures.GRID``).
 """
 from __future__ import annotations
 
+import csv
+
 import functools
 import os
 import sys
@@ -86,6 +88,11 @@ def _read_checked(path: Path, cfg: TrainConfig) -> pd.DataFrame:
         raise
     except Exception as err:  # not text, not CSV, empty
         raise DamagedFile(f"run file {path} is damaged ({type(err).__name__}: {err}); {RETRAIN}") from None
+    with open(path, newline="") as f:  # pandas renames a second "step" to "step.1" and reads on
+        header = next(csv.reader(f), [])
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if twice:
+        raise DamagedFile(f"run file {path} names the columns {twice} twice in its header (line 1); {RETRAIN}")
     needed = ["algo", "seed", "iteration", "step", "eval_return", "frac_opt", "eval_success", "git_rev"]
     if [c for c in needed if c not in df.columns]:
         raise DamagedFile(f"run file {path} lacks the columns {[c for c in needed if c not in df.columns]}; {RETRAIN}")
