@@ -87,7 +87,9 @@ class Figure:
     claim), judged by ``claims.judge``; with ``claims_per_env`` (the prefix of the ``env``
     column) each claim starts with the env it is judged on, on that env's runs alone.
     ``section`` and ``notebook``: where the paper and this repository show it; ``reference``:
-    whose steps its ``paper`` budget is ("": the paper gives none, the budget is ours).
+    whose steps its ``paper`` budget is ("": the paper gives none, the budget is ours); ``ours``:
+    its claims are this project's tests of the paper's mechanism (an ablation), not the paper's
+    words, and are counted apart from them.
     """
 
     id: str
@@ -105,6 +107,7 @@ class Figure:
     section: str = ""
     notebook: str = ""
     reference: str = ""
+    ours: bool = False
 
     def __post_init__(self):
         for name, at in self.budgets.items():

@@ -89,6 +89,11 @@ GLANCE_COLUMNS = ["section", "claim", "notebook", "verdict", "budget", "why", "s
 ONE_BUDGET = "the verdict: one budget"
 
 
+def section(fig) -> str:
+    """Where a figure's claims are counted: its section of the paper, apart for our ablations."""
+    return f"{fig.section}, our ablation" if fig.ours else fig.section
+
+
 def glance_table(judged: list[verdicts.Judged] | None = None) -> pd.DataFrame:
     """``verdicts.glance`` as a table, one row per claim; the claims about an env with no run at
     all grouped into one row per env; ``n_claims`` counts the claims a row stands for."""
@@ -99,7 +104,7 @@ def glance_table(judged: list[verdicts.Judged] | None = None) -> pd.DataFrame:
         if v.status == Status.NOT_RUN:
             unrun.setdefault((fig.id, v.claim.env), (j, []))[1].append(v)
             continue
-        rows.append({"section": fig.section, "claim": v.claim.text, "notebook": fig.notebook, "verdict": v.status.value,
+        rows.append({"section": section(fig), "claim": v.claim.text, "notebook": fig.notebook, "verdict": v.status.value,
                      "budget": budget_share(fig, v.claim.env, j.budget, j.seeds_on_disk), "why": words.reason(v),
                      "seeds": words.seeds(v), "at 5 seeds": ONE_BUDGET if j.first is None else j.first.status.value,
                      "why at 5 seeds": "-" if j.first is None else words.reason(j.first), "n_claims": 1,
@@ -109,7 +114,7 @@ def glance_table(judged: list[verdicts.Judged] | None = None) -> pd.DataFrame:
         env = env or fig.common.get("env", fig.id)
         short = env.removeprefix(fig.claims_per_env or "")
         texts = [v.claim.text.removeprefix(f"{short}: ") for v in vs]  # the env is said once, first
-        rows.append({"section": fig.section, "claim": f"{short}: {len(texts)} "
+        rows.append({"section": section(fig), "claim": f"{short}: {len(texts)} "
                                                      f"claim{'s' * (len(texts) > 1)} ({'; '.join(texts)})",
                      "notebook": fig.notebook, "verdict": Status.NOT_RUN.value,
                      "budget": budget_share(fig, env, j.budget, 0), "why": words.gap(vs[0].gap, vs[0]), "seeds": "-",

@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pandas as pd
 
+from oapo_lite.study.catalogue import figures
 from oapo_lite.study.catalogue.figures import get_figure
 from oapo_lite.study.catalogue.figures.layouts import CURVES
 from oapo_lite.study.judge import verdicts
@@ -163,11 +164,15 @@ def dose(judged, figure: str) -> dict:
 
 
 def on_seeds(v: Verdict) -> str:
-    """A verdict in a clause: its env, status, seeds and final values, and whether one seed carries it."""
+    """A verdict on a map in a clause: the map (and whether the paper ran it), status, seeds, final
+    values, how much the curve reused across networks, and whether one seed carries it."""
     finals = " against ".join(f"{level.curve} {level.interval.point:.2f}" for level in v.levels if level.stat == "final")
-    return (f"{env_name(v)}: {v.status} on {len(v.robustness.seeds)} seeds, {finals}"
-            + (f", reusing across networks at {v.reuse[0].overall:.0%} of its evaluations" if v.status in MECHANISM
-               else ", resting on one seed" if v.robustness.one_seed else ""))
+    env = env_name(v)
+    return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: {v.status} on "
+            f"{len(v.robustness.seeds)} seeds, {finals}"
+            + (f", reusing across networks at {v.reuse[0].while_learning:.0%} of its evaluations while it learned"
+               if v.reuse else "")
+            + (", resting on one seed" if v.status in DECIDED and v.robustness.one_seed else ""))
 
 
 def smax_sentence(judged) -> str:
@@ -179,8 +184,8 @@ def smax_sentence(judged) -> str:
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
             f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps an interval decided "
-            f"({'; '.join(on_seeds(v) for v in s['heads'] if v.levels)}), because plain parameter sharing is strong "
-            f"there (MAPPO ended at or above HAPPO on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
+            f"({'; '.join(on_seeds(v) for v in s['heads'] if v.levels)}), while plain parameter sharing was strong "
+            f"there (MAPPO's final IQM at or above HAPPO's on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
             + (", ".join(env_name(v) for v in reuse) or "no map") + ", but a KL gate ended above both no reuse and "
             f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
             + (f" (on 6h_vs_8z every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}, a ceiling)" if top else ""))
@@ -205,21 +210,29 @@ def _switch(judged) -> Verdict | None:
 
 def mujoco_sentence(judged) -> str:
     head = next(v for j, v in headline_verdicts(judged) if j.figure.id == "figA_mamujoco")
-    v = _switch(judged)
+    switch = _switch(judged)
     degrade = [v for v in _figure(judged, "figA_mamujoco") if v.claim.curves[0] == "happo"]
+    always = {v.claim.test: v for v in _figure(judged, "fig_selection_mamujoco") if v.claim.curves == ("oappo always", "happo")}
+    one = lambda v: ", resting on one seed" if v.robustness.one_seed else ""  # noqa: E731
     text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3, at {_share('figA_mamujoco')} of HARL's steps), the paper's "
             "claim that direct experience reuse degrades performance is "
             + " and ".join(f"{v.status} for {v.claim.curves[1].upper()} on {len(v.robustness.seeds)} seeds "
-                           f"({'; '.join(words.estimate(e) for e in v.estimates)}"
-                           f"{', resting on one seed' if v.robustness.one_seed else ''})" for v in degrade)
-            + f", and its claim that OAPPO ends above no reuse is {head.status} (IQM of {head.estimates[0].seeds} paired "
-            f"differences {words.short(head.estimates[0].interval)})")
-    if v is not None and v.status == Status.NO_SELECTION:
-        gated, always = v.estimates[1], v.estimates[2]
-        text += (f": reuse across the two legs lowered the return (always-on minus HAPPO {always.interval.point:+.0f} "
-                 f"over {always.seeds} paired seeds), and with one peer the gate is a switch that shut for good by "
-                 f"{v.reuse[0].last_open / 1e3:,.0f}k steps on every seed, beating always-on reuse "
-                 f"({gated.interval.point:+.0f}, {gated.higher_on} of {gated.seeds} seeds) only by turning reuse off")
+                           f"({'; '.join(words.estimate(e) for e in v.estimates)}{one(v)})" for v in degrade)
+            + f", and OAPPO's gated reuse, read strictly as ending above no reuse seed by seed, is {head.status} (IQM of "
+            f"{head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)}{one(head)})")
+    if always:
+        text += ("; in the seed-paired ablation, always-on reuse across the two legs against no reuse is "
+                 + " and ".join(f"{v.status} {'on speed' if v.claim.test == 'faster' else 'on the final return'} "
+                                f"({'P(faster) ' if v.claim.test == 'faster' else ''}{words.short(v.estimates[0].interval)}"
+                                f" over {v.estimates[0].seeds} paired seeds)"
+                                for v in always.values())
+                 + (", so reuse slowed the legs down, as the paper's claim has it" if always.get("faster") is not None
+                    and always["faster"].status == Status.CONTRADICTED else ""))
+    if switch is not None and switch.status == Status.NO_SELECTION:
+        gated = switch.estimates[1]
+        text += (f", and with one peer the gate is a switch that shut for good by {switch.reuse[0].last_open / 1e3:,.0f}k "
+                 f"steps on every seed, beating always-on reuse ({gated.interval.point:+.0f}, {gated.higher_on} of "
+                 f"{gated.seeds} seeds) only by turning reuse off")
     d = dose(judged, "fig_dose_mamujoco")
     if d["testable"]:
         text += ("; where each leg's gate has three peers to choose between, a gate ended above both no reuse and "
@@ -243,9 +256,10 @@ def unrun_sentence(judged) -> str:
     priced = [costs.plan("paper", figures=(f,), from_nothing=True, envs={j.lead.claim.env for j in never})[0][0]
               for f in by]
     hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
-    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need about {hours:,.0f} CPU hours"
-            + (f" ({unpriced} of {sum(p.runs for p in priced)} runs have no price yet and are left out)" if unpriced
-               else "") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
+    runs = sum(p.runs for p in priced)
+    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need "
+            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that can be priced from runs "
+               "made here" if unpriced else f"about {hours:,.0f} CPU hours") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
 
 
 def untested_clause(judged) -> str:
@@ -264,9 +278,9 @@ def untested_clause(judged) -> str:
 
 
 def opening(judged: list[verdicts.Judged] | None = None) -> str:
-    """The README's opening: one sentence per engine family and one on what was never run."""
+    """The README's opening: one paragraph per engine family and one on what was never run."""
     judged = verdicts.glance() if judged is None else judged
-    return " ".join([maze_sentence(judged), smax_sentence(judged), mujoco_sentence(judged), unrun_sentence(judged)])
+    return "\n\n".join([maze_sentence(judged), smax_sentence(judged), mujoco_sentence(judged), unrun_sentence(judged)])
 
 
 def headlines(judged: list[verdicts.Judged] | None = None) -> str:
@@ -302,13 +316,14 @@ def cost_sentence() -> str:
             if "happo" not in part.index or np.isnan(part.loc["happo", "cpu_s"]):
                 continue
             rows = [(label, r) for label, r in part.iterrows() if label != "happo" and "sampled" not in label]
-            said = [f"{label} {r['cpu_s']:.0f}" + ("" if r["side_by_side"] else " (measured at other revisions)")
-                    for label, r in rows if not np.isnan(r["cpu_s"])]
+            said = [f"{label} {r['cpu_s']:.0f}" for label, r in rows if r["side_by_side"] and not np.isnan(r["cpu_s"])]
+            apart = [label for label, r in rows if not r["side_by_side"]]
             paid = [label for label, r in rows if r["side_by_side"] and r["cpu_s"] < part.loc["happo", "cpu_s"]]
             parts.append(f"{env.partition(':')[2]} (to {level.reach.format(level.threshold)}): HAPPO "
                          f"{part.loc['happo', 'cpu_s']:.0f}, " + ", ".join(said) + " CPU seconds; reuse "
                          + (f"reached it on less compute than HAPPO with {', '.join(paid)}" if paid
-                            else "reached it on no less compute than HAPPO"))
+                            else "reached it on no less compute than HAPPO")
+                         + (f" ({', '.join(apart)}: measured at other revisions than HAPPO, left out)" if apart else ""))
     return ("What reuse costs, from the runs' own records (the median over seeds of the CPU seconds spent when a "
             "curve's IQM first reached the level; without an interval, a reading rather than a verdict): "
             + "; ".join(parts) + ".") if parts else ""

@@ -27,7 +27,7 @@ PALETTE = {
     # the dose-responses on 2s3z and Ant 4x2: the gate at sigma from tight (darker) to loose
     # (lighter), between no reuse (HAPPO) and always-on; a median sigma of 0.046 is the gated
     # curve's colour (``ALIASES``)
-    "oappo sigma=0.031": "#002a10", "oappo sigma=0.035": "#00441b", "oappo sigma=0.077": "#238b45",
+    "oappo sigma=0.031": "#0b3b1f", "oappo sigma=0.035": "#00441b", "oappo sigma=0.077": "#238b45",
     "oappo sigma=0.11": "#74c476", "oappo sigma=0.34": "#78c679", "oappo sigma=0.81": "#addd8e",
     # OAPPO's variants
     "oappo adaptive": "#145214", "oappo adaptive lambda=0.4": "#637939", "oappo warm-up 10": "#8ca252",

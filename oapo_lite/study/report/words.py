@@ -126,13 +126,15 @@ def shown(v: Verdict) -> str:
     against no reuse, and what the gate did against always-on, from the third and second estimates."""
     gated, always = v.estimates[1], v.estimates[2]
     better = "ended higher" if gated.run_stat == "final" else "was faster"
-    reused = ("lowered" if always.interval.point < (always.against if always.kind == "paired" else 0.5) else "raised")
     measure = "the final value" if always.run_stat == "final" else "the speed"
-    helped = gated.interval.point > (gated.against if gated.kind == "paired" else 0.5)
-    return (f"what they show: always-on reuse against no reuse, {reading(always)} (reuse {reused} {measure}); the "
+    side = lambda e: ("below" if e.interval.high < e.against else "above" if e.interval.low > e.against  # noqa: E731
+                      else "across")
+    reused = {"below": f"reuse lowered {measure}", "above": f"reuse raised {measure}",
+              "across": f"the interval is across {always.against:g}: no effect of reuse on {measure} shown"}[side(always)]
+    return (f"what they show: always-on reuse against no reuse, {reading(always)} ({reused}); the "
             f"gated curve against always-on, {reading(gated)}"
-            + (f" (the gated curve {better}: the gate helped by switching reuse off)" if helped else
-               " (switching reuse off did not help)"))
+            + (f" (the gated curve {better}: the gate helped by switching reuse off)" if side(gated) == "above" else
+               " (switching reuse off did not help measurably)"))
 
 
 def robustness(v: Verdict) -> str:

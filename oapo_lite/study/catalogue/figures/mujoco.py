@@ -82,7 +82,8 @@ FIGURES = (
                "paper": HARL_SCALE},
            metric=SPEED_RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
                                                               "HalfCheetah 2x3", per_env=False, metric=SPEED_RETURN)),
-           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+           section="App. A", ours=True,
+           notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # Does OAPPO's early reuse (its gate is open while the untrained nets look alike) lower the
     # return? Ten seed pairs, so that an interval on the final return's difference can decide it;
     # not a claim of the paper. The control lets Eq. 9 act only after 10 iterations (20k steps),
@@ -124,7 +125,8 @@ FIGURES = (
            common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS),
                                                                           "paper": HARL_SCALE},
            metric=ANT_RETURN, claims=tuple(dose_claims(tuple(ANT_DOSE_SIGMA.values()), "Ant 4x2", ANT_RETURN)),
-           section="App. A", notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
+           section="App. A", ours=True,
+           notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # the normalisation rule's choice held out: both learners on the ablation's seeds 10-19 (the
     # normalised runs are the ablation's HAPPO runs)
     Figure("fig_normalize_out_of_sample", (("happo", FIGA_CURVES["happo"]), ("happo normalized", SELECTION_LEARNER)),

@@ -24,6 +24,9 @@ FIG4_MAPS = ("3m", "2s3z", "6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 # the paper's heterogeneous maps are 3s5z_vs_3s6z and MMM2 (here its stand-in); 2s3z is
 # heterogeneous too and small enough to learn on a CPU
 SMAX_HETEROGENEOUS = ("2s3z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
+# the maps of the paper's Fig. 4 (its super hard maps; MMM2 here as its SMAX stand-in): 3m and
+# 2s3z are ours, small enough to learn on a CPU
+PAPER_MAPS = ("6h_vs_8z", "3s5z_vs_3s6z", "MMM2_like_7m2M_vs_8m3M")
 # the paper's headline on them, OAPPO above MAPPO, by the reading each map trains (the long maps: a net per type)
 HEADLINE_READING = {"2s3z": "oappo", "3s5z_vs_3s6z": "oappo type", "MMM2_like_7m2M_vs_8m3M": "oappo type"}
 
@@ -140,7 +143,8 @@ FIGURES = (
                "paper": HARL_STEPS},
            metric=SPEED_WIN_RATE, claims=tuple(c for env in SELECTION_SMAX for c in selection_claims(
                env, sigma_on(SELECTION_SIGMA, env), env.removeprefix("smax:"), per_env=True, metric=SPEED_WIN_RATE)),
-           claims_per_env="smax:", section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
+           claims_per_env="smax:", section="6.2", ours=True,
+           notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on 2s3z, seed-paired
     # with the selection ablation (its HAPPO, always-on and median-sigma runs are these)
     Figure("fig_dose_smax", dose_curves(DOSE_SMAX, tuple(DOSE_SIGMA.values()), tuned("happo")),
@@ -148,7 +152,8 @@ FIGURES = (
                "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64), "paper": HARL_STEPS},
            metric=SPEED_WIN_RATE, claims=tuple(dose_claims(tuple(s for q, s in DOSE_SIGMA.items() if q != 0.5),
                                                      DOSE_SMAX.removeprefix("smax:"), SPEED_WIN_RATE)),
-           section="6.2", notebook="20_smax_fig4", reference="HARL's steps for the map"),
+           section="6.2", ours=True,
+           notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # at the config of Fig. 4's committed runs, so HAPPO, MAPPO and OAPPO (per agent, max) there
     # are those runs, read from the cache
     Figure("fig_readings_smax", tuple(c for env in READING_MAPS for c in reading_curves(
