@@ -129,7 +129,8 @@ def maze_sentence(judged) -> str:
     balance = m["balance"]
     return (f"On the mazes (Section 6.1), the paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
             f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}), and reuse "
-            f"is why: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the optimum on {b('oappo')} "
+            f"helped them reach the optimum: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the "
+            f"optimum on {b('oappo')} "
             f"runs against HAPPO's {b('happo')} (a moderate share of the peer's experience carried the runs HAPPO lost "
             f"to exploration), while leaning on the peer trapped them ({lean}), so the paper's \"lambda = 0.4 strikes "
             f"a balance\" is {balance.status} here.")
@@ -168,11 +169,22 @@ def on_seeds(v: Verdict) -> str:
     values, how much the curve reused across networks, and whether one seed carries it."""
     finals = " against ".join(f"{level.curve} {level.interval.point:.2f}" for level in v.levels if level.stat == "final")
     env = env_name(v)
-    return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: {v.status} on "
-            f"{len(v.robustness.seeds)} seeds, {finals}"
+    return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: "
+            f"{figures.readings.READING_NAMES[v.claim.curves[0]]} {v.status} on {len(v.robustness.seeds)} seeds, {finals}"
             + (f", reusing across networks at {v.reuse[0].while_learning:.0%} of its evaluations while it learned"
                if v.reuse else "")
             + (", resting on one seed" if v.status in DECIDED and v.robustness.one_seed else ""))
+
+
+def other_readings(judged, head: Verdict) -> str:
+    """The same claim on the same map under OAPPO's other readings of the networks, where they
+    tested reuse (a reading whose seats share networks tests sharing and is left out)."""
+    others = [v for v in _figure(judged, head.figure) if v.claim.env == head.claim.env and v.claim.test == head.claim.test
+              and v.claim.curves[1:] == head.claim.curves[1:] and v.claim.curves[0] != head.claim.curves[0]
+              and v.status not in MECHANISM and v.levels]
+    return "".join(f"; {figures.readings.READING_NAMES[v.claim.curves[0]]} there: {v.status}, "
+                   + " against ".join(f"{level.interval.point:.2f}" for level in v.levels if level.stat == "final")
+                   + (", resting on one seed" if v.robustness.one_seed else "") for v in others)
 
 
 def smax_sentence(judged) -> str:
@@ -184,7 +196,7 @@ def smax_sentence(judged) -> str:
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
             f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps an interval decided "
-            f"({'; '.join(on_seeds(v) for v in s['heads'] if v.levels)}), while plain parameter sharing was strong "
+            f"({'; '.join(on_seeds(v) + other_readings(judged, v) for v in s['heads'] if v.levels)}), while plain parameter sharing was strong "
             f"there (MAPPO's final IQM at or above HAPPO's on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
             + (", ".join(env_name(v) for v in reuse) or "no map") + ", but a KL gate ended above both no reuse and "
             f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
@@ -224,7 +236,7 @@ def mujoco_sentence(judged) -> str:
         text += ("; in the seed-paired ablation, always-on reuse across the two legs against no reuse is "
                  + " and ".join(f"{v.status} {'on speed' if v.claim.test == 'faster' else 'on the final return'} "
                                 f"({'P(faster) ' if v.claim.test == 'faster' else ''}{words.short(v.estimates[0].interval)}"
-                                f" over {v.estimates[0].seeds} paired seeds)"
+                                f" over {v.estimates[0].seeds} paired seeds{one(v)})"
                                 for v in always.values())
                  + (", so reuse slowed the legs down, as the paper's claim has it" if always.get("faster") is not None
                     and always["faster"].status == Status.CONTRADICTED else ""))
@@ -258,8 +270,7 @@ def unrun_sentence(judged) -> str:
     hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
     runs = sum(p.runs for p in priced)
     return (f"Never run: {'; '.join(parts)}: their `paper` budgets need "
-            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that can be priced from runs "
-               "made here" if unpriced else f"about {hours:,.0f} CPU hours") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
+            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that have a measured price" if unpriced else f"about {hours:,.0f} CPU hours") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
 
 
 def untested_clause(judged) -> str:
