@@ -160,6 +160,7 @@ def dose(judged, figure: str) -> dict:
            and v.claim.curves[0] == "oappo gated"] if vs else []
     sigma = lambda v: float(next(kw for label, kw in get_figure(v.figure).curves if label == v.claim.curves[0])["sigma"])  # noqa: E731
     return {"verdicts": sorted(vs, key=sigma), "sigmas": sorted(sigma(v) for v in vs),
+            "planned": len(get_figure(figure).budget("cpu").seeds),
             "selected": [sigma(v) for v in vs if v.held], "testable": [v for v in vs if v.estimates],
             "never_shut": sorted(sigma(v) for v in vs if v.reuse and v.reuse[0].never_shut == v.reuse[0].seeds)}
 
@@ -211,7 +212,7 @@ def dose_clause(d: dict, where: str) -> str:
     from which sigma up the gate never shut."""
     seeds = min(v.estimates[0].seeds for v in d["testable"])
     return (f"at {len(d['selected'])} of {len(d['sigmas'])} sigmas on {where} from {d['sigmas'][0]:g} to "
-            f"{d['sigmas'][-1]:g} ({seeds} paired seeds"
+            f"{d['sigmas'][-1]:g} ({seeds} of {d['planned']} paired seeds"
             + (f"; from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse" if d["never_shut"]
                else "") + ")")
 
