@@ -23,7 +23,7 @@ from oapo_lite.study.studies import layout_study, selection
 LAYOUT_BUDGET = "paper"  # the layout study's committed runs (5 seeds per layout and curve)
 LEAN = ("oappo lambda=0.2", "oappo lambda=0.4")  # the readings that lean on the peer (lambda < 1/2)
 ABLATION = ("fig_selection_smax", "fig_selection_mamujoco")
-DOSE = ("fig_dose_smax",)
+DOSE = ("fig_dose_smax", "fig_dose_mamujoco")
 CEILING = 0.9  # a win rate every run of every curve ends at or above: final values cannot tell curves apart
 
 
@@ -127,7 +127,9 @@ def maze_sentence(judged) -> str:
     b = lambda label: f"{int(below.loc[label, 'below'])} of {int(below.loc[label, 'runs'])}"  # noqa: E731
     lean = ", ".join(f"{b(c)} at lambda = {CURVES[c]['reuse_lambda']:g}" for c in LEAN if c in below.index)
     balance = m["balance"]
-    return (f"On the mazes (Section 6.1), the paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
+    j = m["faster"]
+    return (f"On the mazes (Section 6.1; {claims.budget_share(j.figure.id, None, j.budget, j.seeds_on_disk)}), the "
+            f"paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
             f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}), and reuse "
             f"helped them reach the optimum: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the "
             f"optimum on {b('oappo')} "
@@ -173,6 +175,7 @@ def on_seeds(v: Verdict) -> str:
     return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: "
             f"{figures.readings.READING_NAMES[v.claim.curves[0]]} {v.status} on {len(v.robustness.seeds)} seeds, {finals}"
             + (f", reusing across networks at {v.reuse[0].while_learning:.0%} of its evaluations while it learned"
+               + (" (its gate never shut: reuse without selection)" if v.reuse[0].while_learning >= 1 else "")
                if v.reuse else "")
             + (", resting on one seed" if v.status in DECIDED and v.robustness.one_seed else ""))
 
@@ -211,8 +214,9 @@ def dose_clause(d: dict, where: str) -> str:
     """How many of a dose-response's sigmas selected (``dose``), on how many paired seeds, and
     from which sigma up the gate never shut."""
     seeds = min(v.estimates[0].seeds for v in d["testable"])
+    within = sum(v.status == Status.WITHIN_NOISE for v in d["verdicts"])
     return (f"at {len(d['selected'])} of {len(d['sigmas'])} sigmas on {where} from {d['sigmas'][0]:g} to "
-            f"{d['sigmas'][-1]:g} ({seeds} of {d['planned']} paired seeds"
+            f"{d['sigmas'][-1]:g} ({seeds} of {d['planned']} paired seeds; {within} within noise"
             + (f"; from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse" if d["never_shut"]
                else "") + ")")
 
@@ -239,8 +243,10 @@ def mujoco_sentence(judged) -> str:
                                 f"({'P(faster) ' if v.claim.test == 'faster' else ''}{words.short(v.estimates[0].interval)}"
                                 f" over {v.estimates[0].seeds} paired seeds{one(v)})"
                                 for v in always.values())
-                 + (", so reuse slowed the legs down, as the paper's claim has it" if always.get("faster") is not None
-                    and always["faster"].status == Status.CONTRADICTED else ""))
+                 + ("" if always.get("faster") is None or always["faster"].status != Status.CONTRADICTED
+                    else ": the paper's direction, reuse slowing the legs down, but one seed's removal overturns it"
+                    if always["faster"].robustness.one_seed else ", so reuse slowed the legs down, as the paper's claim "
+                    "has it"))
     if switch is not None and switch.status == Status.NO_SELECTION:
         gated = switch.estimates[1]
         text += (f", and with one peer the gate is a switch that shut for good by {switch.reuse[0].last_open / 1e3:,.0f}k "
@@ -271,7 +277,9 @@ def unrun_sentence(judged) -> str:
     hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
     runs = sum(p.runs for p in priced)
     return (f"Never run: {'; '.join(parts)}: their `paper` budgets need "
-            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that have a measured price" if unpriced else f"about {hours:,.0f} CPU hours") + ", a cluster's job" + untested_clause(judged) + "; the table below says claim by claim what held.")
+            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that have a measured price"
+               if unpriced else f"about {hours:,.0f} CPU hours")
+            + ", a cluster's job" + untested_clause(judged) + ". The table below says claim by claim what held.")
 
 
 def untested_clause(judged) -> str:
@@ -283,7 +291,7 @@ def untested_clause(judged) -> str:
     idle = [(f, js) for (f, env), js in by.items() if all(j.lead.status == Status.NOT_TESTABLE and j.lead.gap.kind ==
                                                            "learned" for j in js)]
     return "".join(
-        f"; Section {js[0].lead.section}'s {env_name(js[0].lead)} ran at "
+        f". Section {js[0].lead.section}'s {env_name(js[0].lead)} ran at "
         f"{claims.budget_share(f, js[0].lead.claim.env, js[0].budget, js[0].seeds_on_disk)} and tested nothing: "
         + " and ".join(sorted({n.curve for j in js for n in j.lead.gap.not_learned})) + " did not learn"
         for f, js in idle)
