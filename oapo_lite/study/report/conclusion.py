@@ -167,13 +167,18 @@ def dose(judged, figure: str) -> dict:
             "never_shut": sorted(sigma(v) for v in vs if v.reuse and v.reuse[0].never_shut == v.reuse[0].seeds)}
 
 
+def _finals(v: Verdict, named: bool = True) -> str:
+    """A verdict's curves' final IQMs, "a 0.94 against b 0.98" (``named``) or "0.94 against 0.98"."""
+    return " against ".join(f"{level.curve} " * named + f"{level.interval.point:.2f}"
+                            for level in v.levels if level.stat == "final")
+
+
 def on_seeds(v: Verdict) -> str:
     """A verdict on a map in a clause: the map (and whether the paper ran it), status, seeds, final
     values, how much the curve reused across networks, and whether one seed carries it."""
-    finals = " against ".join(f"{level.curve} {level.interval.point:.2f}" for level in v.levels if level.stat == "final")
     env = env_name(v)
     return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: "
-            f"{figures.readings.READING_NAMES[v.claim.curves[0]]} {v.status} on {len(v.robustness.seeds)} seeds, {finals}"
+            f"{figures.readings.READING_NAMES[v.claim.curves[0]]} {v.status} on {len(v.robustness.seeds)} seeds, {_finals(v)}"
             + (f", reusing across networks at {v.reuse[0].while_learning:.0%} of its evaluations while it learned"
                + (" (its gate never shut: reuse without selection)" if v.reuse[0].while_learning >= 1 else "")
                if v.reuse else "")
@@ -187,7 +192,7 @@ def other_readings(judged, head: Verdict) -> str:
               and v.claim.curves[1:] == head.claim.curves[1:] and v.claim.curves[0] != head.claim.curves[0]
               and v.status not in MECHANISM and v.levels]
     return "".join(f"; {figures.readings.READING_NAMES[v.claim.curves[0]]} there: {v.status}, "
-                   + " against ".join(f"{level.interval.point:.2f}" for level in v.levels if level.stat == "final")
+                   + _finals(v, named=False)
                    + (", resting on one seed" if v.robustness.one_seed else "") for v in others)
 
 

@@ -11,7 +11,6 @@ row belongs to. What the runs are is the grid's (``figures.GRID``).
 from __future__ import annotations
 
 import csv
-
 import functools
 import os
 import sys
