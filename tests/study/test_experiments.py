@@ -179,6 +179,22 @@ def test_load_figure_can_read_only_the_runs_on_disk(tmp_path, monkeypatch):
         experiments.load_figure("fig4_smax", "smoke")  # loading never trains
 
 
+def test_a_paired_figure_reads_a_seed_only_once_every_curve_of_its_env_has_run_it(tmp_path, monkeypatch):
+    monkeypatch.setenv("OAPO_FIGURES", str(tmp_path))
+    runs = figures.runs_of("fig_selection_smax", "smoke")
+    first = (runs[0].cfg.env, runs[0].cfg.seed)
+    seed_runs = [r for r in runs if (r.cfg.env, r.cfg.seed) == first]
+    assert len(seed_runs) >= 3
+    for r in seed_runs[:-1]:  # a grid stopped before the seed's last curve
+        fakes.write_run(r.cfg, "smoke", lambda steps: steps / 6400, grid=1, env=r.cfg.env)
+    df, left_out = experiments.read_figure("fig_selection_smax", "smoke", skip_missing=True)
+    assert df.empty and {r.cfg.run_id() for r in seed_runs[:-1]} <= set(left_out)
+    fakes.write_run(seed_runs[-1].cfg, "smoke", lambda steps: steps / 6400, grid=1, env=seed_runs[-1].cfg.env)
+    df, left_out = experiments.read_figure("fig_selection_smax", "smoke", skip_missing=True)
+    assert set(df["label"]) == {r.label for r in seed_runs} and set(zip(df["env"], df["seed"])) == {first}
+    assert not {r.cfg.run_id() for r in seed_runs} & set(left_out)
+
+
 def test_train_runs_trains_what_is_missing_and_names_failures(tmp_path, monkeypatch):
     from oapo_lite.study.runs import executors
 

@@ -89,7 +89,9 @@ class Figure:
     ``section`` and ``notebook``: where the paper and this repository show it; ``reference``:
     whose steps its ``paper`` budget is ("": the paper gives none, the budget is ours); ``ours``:
     its claims are this project's tests of the paper's mechanism (an ablation), not the paper's
-    words, and are counted apart from them.
+    words, and are counted apart from them; ``paired``: a seed gives every curve the same initial
+    networks and envs, so a seed is read only once every curve of its env has run it (a grid
+    stopped midway leaves no curve with a seed the others lack).
     """
 
     id: str
@@ -108,6 +110,7 @@ class Figure:
     notebook: str = ""
     reference: str = ""
     ours: bool = False
+    paired: bool = False
 
     def __post_init__(self):
         for name, at in self.budgets.items():

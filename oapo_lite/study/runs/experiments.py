@@ -385,13 +385,18 @@ def versions(figure: str, budget: str) -> tuple:
 
 def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[pd.DataFrame, list[str]]:
     """The tidy rows of one figure from the run cache, and the ids of the runs left out (only
-    with ``skip_missing``; otherwise a run not on disk raises naming it). A figure with no runs at
-    ``budget`` is refused, or with ``skip_missing`` read as empty (the tables that show what is on
-    disk at any budget). Reads only."""
+    with ``skip_missing``; otherwise a run not on disk raises naming it): those not on disk and,
+    in a ``paired`` figure, those on a seed that another curve of their env has not run yet. A
+    figure with no runs at ``budget`` is refused, or with ``skip_missing`` read as empty (the
+    tables that show what is on disk at any budget). Reads only."""
     if not boolean(skip_missing, "skip_missing"):
         required_runs(figure, budget)
     frames, missing = [], []
-    for label, cfg in figure_runs(figure, budget):
+    runs = figure_runs(figure, budget)
+    if get_figure(figure).paired:
+        runs, unpaired = _paired(runs, budget)
+        missing += unpaired
+    for label, cfg in runs:
         try:
             frames.append(read_run(cfg, budget).assign(label=label, figure=figure))
             continue
@@ -406,6 +411,17 @@ def read_figure(figure: str, budget: str, skip_missing: bool = False) -> tuple[p
             print(f"warning: {err}", file=sys.stderr)
         missing.append(cfg.run_id())
     return (pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()), missing
+
+
+def _paired(runs: list, budget: str) -> tuple[list, list[str]]:
+    """The (label, config) pairs of ``runs`` on the (env, seed)s whose every run is on disk, and
+    the ids of the others that are on disk (a seed-paired figure reads a seed whole or not at all)."""
+    there = {cfg.run_id(): on_disk(cfg, budget) for _, cfg in runs}
+    whole: dict[tuple, bool] = {}
+    for _, cfg in runs:
+        whole[cfg.env, cfg.seed] = whole.get((cfg.env, cfg.seed), True) and there[cfg.run_id()]
+    keep = [(label, cfg) for label, cfg in runs if whole[cfg.env, cfg.seed]]
+    return keep, [cfg.run_id() for _, cfg in runs if not whole[cfg.env, cfg.seed] and there[cfg.run_id()]]
 
 
 def load_figure(figure: str, budget: str, skip_missing: bool = False) -> pd.DataFrame:

@@ -82,7 +82,7 @@ FIGURES = (
                "paper": HARL_SCALE},
            metric=SPEED_RETURN, claims=tuple(selection_claims(HALFCHEETAH, sigma_on(SELECTION_SIGMA, HALFCHEETAH),
                                                               "HalfCheetah 2x3", per_env=False, metric=SPEED_RETURN)),
-           section="App. A", ours=True,
+           section="App. A", ours=True, paired=True,
            notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # Does OAPPO's early reuse (its gate is open while the untrained nets look alike) lower the
     # return? Ten seed pairs, so that an interval on the final return's difference can decide it;
@@ -93,7 +93,7 @@ FIGURES = (
            common=dict(env=HALFCHEETAH), runs_at=("smoke", "cpu"), budgets={
                "smoke": MAMUJOCO_SMOKE,
                "cpu": At(seeds=tuple(range(10)), steps=600_000, eval_every=10, eval_episodes=10, config=MAMUJOCO_CPU)},
-           metric=RETURN, section="App. A", notebook="21_mamujoco_appA"),
+           metric=RETURN, section="App. A", notebook="21_mamujoco_appA", paired=True),
     Figure("fig_mamujoco_settings", (("happo", dict(algo="happo")),
                                      *((f"happo {name}", dict(algo="happo", **kw)) for name, kw in HARL_HALFCHEETAH.items()),
                                      ("happo HARL", dict(algo="happo", **{k: v for kw in HARL_HALFCHEETAH.values()
@@ -125,7 +125,7 @@ FIGURES = (
            common=dict(env=ANT, ppo_epochs=15), runs_at=("cpu",), budgets={"cpu": replace(MUJOCO_1M, seeds=SELECTION_SEEDS),
                                                                           "paper": HARL_SCALE},
            metric=ANT_RETURN, claims=tuple(dose_claims(tuple(ANT_DOSE_SIGMA.values()), "Ant 4x2", ANT_RETURN)),
-           section="App. A", ours=True,
+           section="App. A", ours=True, paired=True,
            notebook="21_mamujoco_appA", reference="HARL's MaMuJoCo scale; App. A gives no steps"),
     # the normalisation rule's choice held out: both learners on the ablation's seeds 10-19 (the
     # normalised runs are the ablation's HAPPO runs)

@@ -143,7 +143,7 @@ FIGURES = (
                "paper": HARL_STEPS},
            metric=SPEED_WIN_RATE, claims=tuple(c for env in SELECTION_SMAX for c in selection_claims(
                env, sigma_on(SELECTION_SIGMA, env), env.removeprefix("smax:"), per_env=True, metric=SPEED_WIN_RATE)),
-           claims_per_env="smax:", section="6.2", ours=True,
+           claims_per_env="smax:", section="6.2", ours=True, paired=True,
            notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # Eq. 9's gate swept from never open (HAPPO) to never shut (always-on) on 2s3z, seed-paired
     # with the selection ablation (its HAPPO, always-on and median-sigma runs are these)
@@ -152,7 +152,7 @@ FIGURES = (
                "cpu": At(seeds=SELECTION_SEEDS, steps=1_000_000, eval_every=10, eval_episodes=64), "paper": HARL_STEPS},
            metric=SPEED_WIN_RATE, claims=tuple(dose_claims(tuple(s for q, s in DOSE_SIGMA.items() if q != 0.5),
                                                      DOSE_SMAX.removeprefix("smax:"), SPEED_WIN_RATE)),
-           section="6.2", ours=True,
+           section="6.2", ours=True, paired=True,
            notebook="20_smax_fig4", reference="HARL's steps for the map"),
     # at the config of Fig. 4's committed runs, so HAPPO, MAPPO and OAPPO (per agent, max) there
     # are those runs, read from the cache
