@@ -9,19 +9,20 @@ per run goes to ``figures/data/gate_statistic/``, its config and git revision in
 it (``benchmarks/gate_statistic.py`` trains what is missing). ``summary`` gives, per env,
 statistic and sigma:
 
-- ``open``: the share of iterations in which some learner has a peer within sigma (the share of
-  iterations an OAPPO run would reuse in, had its nets followed HAPPO's path);
+- ``any open``: the share of iterations in which some learner has a peer within sigma (the
+  share of iterations an OAPPO run would reuse in, had its nets followed HAPPO's path);
 - ``last open``: the last env step at which that happened;
-- ``pairs``: the share of (iteration, learner, peer) within sigma;
+- ``open``: the share of (iteration, learner, peer) within sigma (the ablation's gate-open share,
+  ``selection.gate_use``: every peer of a HAPPO seat is on another network);
 - ``auc`` (maps with two types of seat): the probability that a same-type pair is nearer than a
   cross-type pair of the same iteration, over every iteration (0.5: the distance does not tell
   role partners apart).
 
 The rule that chooses the engine statistic (``choose``) was fixed before any run, and reads K
 alone, never a win rate or return: at the paper's sigma = 0.1, a statistic must (1) let the gate
-operate, ``open`` >= 0.25 on every env, and (2) still gate, ``pairs`` <= 0.9 on every env; among
-those, the largest ``auc`` on 2s3z wins. If none passes both, the one passing (2) with the
-largest smallest ``open`` wins.
+operate, ``any open`` >= 0.25 on every env, and (2) still gate, ``open`` <= 0.9 on every env;
+among those, the largest ``auc`` on 2s3z wins. If none passes both, the one passing (2) with the
+largest smallest ``any open`` wins.
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ from oapo_lite.study.judge.evidence import REUSE_PART
 DATA = experiments.data_dir("cpu") / "gate_statistic"
 ENVS = ("smax:3m", "smax:2s3z", "smax:6h_vs_8z", figures.mujoco.HALFCHEETAH)
 SIGMA = TrainConfig.sigma  # the paper's, where the rule is read
-MIN_OPEN, MAX_PAIRS = REUSE_PART, 0.9  # a gate operates as the verdicts read it; it still gates
+MIN_ANY_OPEN, MAX_OPEN = REUSE_PART, 0.9  # a gate operates as the verdicts read it; it still gates
 
 
 def happo_config(env: str, seed: int) -> TrainConfig:
@@ -78,7 +79,7 @@ def measure(cfg: TrainConfig) -> pd.DataFrame:
 
 
 def summary(df: pd.DataFrame, sigmas=figures.mazes.SIGMAS) -> pd.DataFrame:
-    """Per env, statistic and sigma: open, last open, pairs, auc (see the module docstring),
+    """Per env, statistic and sigma: any open, last open, open, auc (see the module docstring),
     each a mean over the seeds on disk."""
     out = []
     for (env, seed), run in df.groupby(["env", "seed"]):
@@ -89,7 +90,7 @@ def summary(df: pd.DataFrame, sigmas=figures.mazes.SIGMAS) -> pd.DataFrame:
             for sigma in sigmas:
                 open_its = nearest.index[nearest <= sigma]
                 out.append({"env": env, "seed": seed, "statistic": stat, "sigma": sigma,
-                            "open": len(open_its) / len(steps), "pairs": float((run[stat] <= sigma).mean()),
+                            "any open": len(open_its) / len(steps), "open": float((run[stat] <= sigma).mean()),
                             "last open": int(steps[open_its].max()) if len(open_its) else 0,
                             "auc": separation})
     return pd.DataFrame(out).groupby(["env", "statistic", "sigma"]).mean(numeric_only=True).drop(columns="seed")
@@ -109,19 +110,19 @@ def kind_auc(run: pd.DataFrame, stat: str) -> float:
 def choose(table: pd.DataFrame) -> tuple[str, str]:
     """The rule of the module docstring, at sigma = ``SIGMA``: (statistic, why)."""
     at = table.xs(SIGMA, level="sigma")
-    smallest_open = at["open"].groupby("statistic").min()
-    largest_pairs = at["pairs"].groupby("statistic").max()
+    smallest_open = at["any open"].groupby("statistic").min()
+    largest_open = at["open"].groupby("statistic").max()
     auc = at["auc"].xs("smax:2s3z", level="env") if "smax:2s3z" in at.index.get_level_values("env") else None
-    gates = largest_pairs[largest_pairs <= MAX_PAIRS].index
-    both = [s for s in gates if smallest_open[s] >= MIN_OPEN]
+    gates = largest_open[largest_open <= MAX_OPEN].index
+    both = [s for s in gates if smallest_open[s] >= MIN_ANY_OPEN]
     if both:
         best = max(both, key=lambda s: -np.inf if auc is None else auc[s])
         return best, (f"passes both conditions ({', '.join(both)} do); the largest 2s3z auc "
                       f"{'n/a' if auc is None else f'{auc[best]:.2f}'}")
     if len(gates):
         best = max(gates, key=lambda s: smallest_open[s])
-        return best, f"none keeps the gate open in {MIN_OPEN:.0%} of iterations everywhere; the largest smallest open share"
-    return "max", "no statistic still gates (pairs <= 0.9 everywhere fails for all): the paper's max is kept"
+        return best, f"none keeps the gate open in {MIN_ANY_OPEN:.0%} of iterations everywhere; the largest smallest any-open share"
+    return "max", "no statistic still gates (open <= 0.9 everywhere fails for all): the paper's max is kept"
 
 
 def run(envs=ENVS, seeds=(0, 1, 2)) -> None:
