@@ -91,6 +91,8 @@ def _smax_claims(m: str) -> list[Claim]:
             out += [Claim(f"{m}: {name} ends above {other.upper()} (heterogeneous agents)", "higher", (r, other), env,
                           headline=other == "mappo" and r == HEADLINE_READING[m])
                     for other in ("mappo", "happo")]
+        else:  # "surpasses HAPPO in ... performance across all SMAC tasks"
+            out.append(Claim(f"{m}: {name} ends above HAPPO", "higher", (r, "happo"), env))
         if m == "6h_vs_8z":
             out += [Claim(f"{m}: {name} improves more stably than MAPPO", "stabler", (r, "mappo"), env),
                     Claim(f"{m}: {name} ends above MAPPO", "higher", (r, "mappo"), env)]
