@@ -1,4 +1,5 @@
 """The study's plots: one colour per curve in every figure, and no notebook picks its own."""
+import pandas as pd
 import pytest
 
 from oapo_lite.envs import render
@@ -66,6 +67,21 @@ def test_two_curves_of_a_figure_never_share_a_colour_and_a_curve_keeps_its_own()
     assert {name: c for name, c in palette.PALETTE.items() if palette.forbidden(c)} == {}
     with pytest.raises(ValueError, match="no colour for the curve 'a new curve'; add it to"):
         palette.color("a new curve")
+
+
+def test_every_status_has_its_own_colour_in_the_count_figure_and_the_bars_add_up():
+    from oapo_lite.study.judge.records import Status
+
+    assert set(palette.STATUS) == {s.value for s in Status}
+    assert len(set(palette.STATUS.values())) == len(palette.STATUS)
+    assert {s: c for s, c in palette.STATUS.items() if palette.forbidden(c)} == {}
+    counts = pd.DataFrame({"reproduced": [2, 0], "not run": [1, 3], "resting on one seed": [1, 0]}, index=["6.1", "6.3"])
+    ax = plotting.verdict_counts(counts)
+    widths = {}
+    for bar in ax.patches:  # one bar per section and status, stacked left to right
+        widths[bar.get_y()] = widths.get(bar.get_y(), 0) + bar.get_width()
+    assert sorted(widths.values()) == [3, 3]  # "resting on one seed" is no status: not drawn
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["reproduced", "not run"]
 
 
 def test_no_notebook_picks_a_colour_of_its_own():

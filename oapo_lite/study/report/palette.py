@@ -17,12 +17,12 @@ PALETTE = {
     "oappo": OAPPO, "oatrpo": "#9467bd", "mappo": "#ff7f0e", "happo": "#8c564b", "hatrpo": "#e377c2",
     "ippo": "#7f7f7f", "seac": "#bcbd22", "seps": "#17becf",
     # OAPPO's readings of the networks and its gate statistics
-    "oappo one seat": "#98df8a", "oappo type": "#6a51a3",
+    "oappo one seat": "#98df8a", "oappo type": "#01665e",
     "oappo agent max": "#005a32", "oappo agent mean": "#41ab5d", "oappo agent q90": "#a1d99b",
     "oappo type max": "#3f007d", "oappo type mean": "#807dba", "oappo type q90": "#c6c3e0",
     # the selection ablation: gated reuse (Eq. 8's weights, and a sampled source), always-on reuse, and per type
     # within its type only
-    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#dd3497", "oappo type own type": "#f768a1",
+    "oappo gated": "#006d2c", "oappo always": "#d4a017", "oappo type gated": "#35978f", "oappo type own type": "#80cdc1",
     "oappo gated sampled": "#7b6888", "oappo always sampled": "#e7cb94",
     # the dose-responses on 2s3z and Ant 4x2: the gate at sigma from tight (darker) to loose
     # (lighter), between no reuse (HAPPO) and always-on; a median sigma of 0.046 is the gated
@@ -45,6 +45,11 @@ PALETTE = {
 # what is not a curve: Fig. 1's reused and omitted peers (and the mazes' agents, whose colours
 # are ``envs.render.AGENT_COLOURS``)
 REUSED, OMITTED = "#e6a100", "#9a9a9a"
+# a verdict's status, in the figure that counts them: the interval's four readings from the
+# paper's side (dark green) to the other (purple), then the statuses that read no interval in greys
+STATUS = {"reproduced": "#1b7837", "within noise": "#a6dba0", "not reproduced": "#c2a5cf", "contradicted": "#762a83",
+          "not a test of reuse": "#636363", "a test of sharing": "#969696", "not a test of selection": "#bdbdbd",
+          "not testable at this budget": "#d9d9d9", "not run": "#f0f0f0"}
 # other names of a curve in the table (the same runs drawn in another figure)
 ALIASES = {"oappo lambda=0.4": "lambda = 0.4", "oappo lambda=1": "lambda = 1", "oappo lambda=0.2": "lambda = 0.2",
            "happo two legs": "happo", "oappo sigma=0.046": "oappo gated"}

@@ -129,7 +129,8 @@ def across_shares(df: pd.DataFrame, order=None, ax=None, title=None):
     ax.xaxis.set_major_formatter(STEPS)
     ax.set(xlabel="environment steps", ylabel="weight on other\nnetworks' seats", ylim=(-0.02, None),
            title=title or "reuse across networks (median over seeds)")
-    ax.legend(frameon=False, fontsize=8)
+    # below the panel: a gate that never shut draws a line along the top for the whole run
+    ax.legend(frameon=False, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=min(len(order), 3))
     return ax
 
 
@@ -155,6 +156,22 @@ def gate_strips(kl: pd.DataFrame, owner: list[int], sigma: float, names, ax=None
     ax.xaxis.set_major_formatter(STEPS)
     ax.grid(False)
     ax.set(xlabel="environment steps", title=title or f"gate open (K <= sigma = {sigma:g}): share of seeds, dark = all")
+    return ax
+
+
+def verdict_counts(counts: pd.DataFrame, ax=None, title=None):
+    """``claims.summary``'s counts as one stacked bar per section, a colour per status
+    (``palette.STATUS``), with a key below the bars."""
+    ax = ax or plt.subplots(figsize=(9, 3.5))[1]
+    statuses = [c for c in counts.columns if c in palette.STATUS]
+    left = np.zeros(len(counts))
+    for status in statuses:
+        ax.barh(counts.index.astype(str), counts[status], left=left, color=palette.STATUS[status], label=status,
+                edgecolor="white", linewidth=0.5)
+        left += counts[status].to_numpy()
+    ax.invert_yaxis()  # the paper's order, top to bottom
+    ax.set(xlabel="claims", title=title or "the claims' verdicts per section")
+    ax.legend(frameon=False, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3)
     return ax
 
 
