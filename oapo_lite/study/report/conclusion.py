@@ -130,12 +130,11 @@ def maze_sentence(judged) -> str:
     j = m["faster"]
     return (f"On the mazes (Section 6.1; {claims.budget_share(j.figure.id, None, j.budget, j.seeds_on_disk)}), the "
             f"paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
-            f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}), and reuse "
-            f"helped them reach the optimum: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of the "
-            f"optimum on {b('oappo')} "
-            f"runs against HAPPO's {b('happo')} (a moderate share of the peer's experience carried the runs HAPPO lost "
-            f"to exploration), while leaning on the peer trapped them ({lean}), so the paper's \"lambda = 0.4 strikes "
-            f"a balance\" is {balance.status} here.")
+            f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}). Reuse "
+            f"helped the agents reach the optimum: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of "
+            f"the optimum on {b('oappo')} runs against HAPPO's {b('happo')}, since a moderate share of the peer's "
+            f"experience carried the runs HAPPO lost to exploration. Leaning on the peer trapped them ({lean}), so the "
+            f"paper's \"lambda = 0.4 strikes a balance\" is {balance.status} here.")
 
 
 def _smax(judged) -> dict:
@@ -157,9 +156,13 @@ def dose(judged, figure: str) -> dict:
     verdict beside them (the dose figure leaves it to the ablation): the sigmas that selected, and
     those whose gate never shut on any seed (their runs are always-on reuse)."""
     vs = [v for v in _figure(judged, figure) if v.claim.test == "selects"]
-    env = get_figure(figure).curves[0][1].get("env") or get_figure(figure).common.get("env")
     vs += [v for f in ABLATION for v in _figure(judged, f) if v.claim.test == "selects" and env_name(v) == env_name(vs[0])
            and v.claim.curves[0] == "oappo gated"] if vs else []
+    return dose_of(vs, figure)
+
+
+def dose_of(vs: list[Verdict], figure: str) -> dict:
+    """``dose``'s summary of the selection verdicts ``vs`` (final value) of dose-response ``figure``."""
     sigma = lambda v: float(next(kw for label, kw in get_figure(v.figure).curves if label == v.claim.curves[0])["sigma"])  # noqa: E731
     return {"verdicts": sorted(vs, key=sigma), "sigmas": sorted(sigma(v) for v in vs),
             "planned": len(get_figure(figure).budget("cpu").seeds),
@@ -173,16 +176,25 @@ def _finals(v: Verdict, named: bool = True) -> str:
                             for level in v.levels if level.stat == "final")
 
 
+def reading(label) -> str:
+    """OAPPO's reading of the networks in running text: "OAPPO with a net per agent"."""
+    return figures.readings.READING_NAMES[label].replace(" (", " with ").rstrip(")")
+
+
 def on_seeds(v: Verdict) -> str:
-    """A verdict on a map in a clause: the map (and whether the paper ran it), status, seeds, final
-    values, how much the curve reused across networks, and whether one seed carries it."""
+    """A verdict on a map in a sentence or two: the map (and whether the paper ran it), status,
+    seeds, final values and whether one seed carries it; then how much the curve reused across
+    networks, and whether its gate ever shut."""
     env = env_name(v)
-    return (f"{env}{'' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run'}: "
-            f"{figures.readings.READING_NAMES[v.claim.curves[0]]} {v.status} on {len(v.robustness.seeds)} seeds, {_finals(v)}"
-            + (f", reusing across networks at {v.reuse[0].while_learning:.0%} of its evaluations while it learned"
-               + (" (its gate never shut: reuse without selection)" if v.reuse[0].while_learning >= 1 else "")
-               if v.reuse else "")
-            + (", resting on one seed" if v.status in DECIDED and v.robustness.one_seed else ""))
+    text = (f"On {env}{',' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run,'} {reading(v.claim.curves[0])} "
+            f"was {v.status} on {len(v.robustness.seeds)} seeds ({_finals(v)}"
+            + (", resting on one seed" if v.status in DECIDED and v.robustness.one_seed else "") + ").")
+    if v.reuse:
+        r = v.reuse[0]
+        text += (" Its gate never shut: it reused across networks at every evaluation while it learned, so this was "
+                 "reuse without selection." if r.while_learning >= 1 else
+                 f" It reused across networks at {r.while_learning:.0%} of its evaluations while it learned.")
+    return text
 
 
 def other_readings(judged, head: Verdict) -> str:
@@ -191,9 +203,8 @@ def other_readings(judged, head: Verdict) -> str:
     others = [v for v in _figure(judged, head.figure) if v.claim.env == head.claim.env and v.claim.test == head.claim.test
               and v.claim.curves[1:] == head.claim.curves[1:] and v.claim.curves[0] != head.claim.curves[0]
               and v.status not in MECHANISM and v.levels]
-    return "".join(f"; {figures.readings.READING_NAMES[v.claim.curves[0]]} there: {v.status}, "
-                   + _finals(v, named=False)
-                   + (", resting on one seed" if v.robustness.one_seed else "") for v in others)
+    return "".join(f" {reading(v.claim.curves[0])} was {v.status} there ({_finals(v, named=False)}"
+                   + (", resting on one seed" if v.robustness.one_seed else "") + ")." for v in others)
 
 
 def smax_sentence(judged) -> str:
@@ -204,9 +215,11 @@ def smax_sentence(judged) -> str:
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
-            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} maps an interval decided "
-            f"({'; '.join(on_seeds(v) + other_readings(judged, v) for v in s['heads'] if v.levels)}), while plain parameter sharing was strong "
-            f"there (MAPPO's final IQM at or above HAPPO's on every map); in a seed-paired ablation, reuse across networks ended above no reuse on "
+            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['decided'])} "
+            f"map{'s' * (len(s['decided']) != 1)} where the 95% interval decided it. "
+            + " ".join(on_seeds(v) + other_readings(judged, v) for v in s["heads"] if v.levels)
+            + " Plain parameter sharing was strong: MAPPO's final IQM was at or above HAPPO's on every map. "
+            "In a seed-paired ablation, reuse across networks ended above no reuse on "
             + (", ".join(env_name(v) for v in reuse) or "no map") + ", but a KL gate ended above both no reuse and "
             f"always-on reuse on {sum(v.held for v in ends.values())} of {len(ends)} maps"
             + (f" (on 6h_vs_8z every run ended at a win rate of {top[0]:.2f}-{top[1]:.2f}, a ceiling)" if top else ""))
@@ -221,7 +234,7 @@ def dose_clause(d: dict, where: str) -> str:
     seeds = min(v.estimates[0].seeds for v in d["testable"])
     within = sum(v.status == Status.WITHIN_NOISE for v in d["verdicts"])
     return (f"at {len(d['selected'])} of {len(d['sigmas'])} sigmas on {where} from {d['sigmas'][0]:g} to "
-            f"{d['sigmas'][-1]:g} ({seeds} of {d['planned']} paired seeds; {within} within noise"
+            f"{d['sigmas'][-1]:g} (on {seeds} of the {d['planned']} planned paired seeds; {within} within noise"
             + (f"; from {d['never_shut'][0]:g} up the gate never shut: those runs are always-on reuse" if d["never_shut"]
                else "") + ")")
 
@@ -241,27 +254,68 @@ def mujoco_sentence(judged) -> str:
             + " and ".join(f"{v.status} for {v.claim.curves[1].upper()} on {len(v.robustness.seeds)} seeds "
                            f"({'; '.join(words.estimate(e) for e in v.estimates)}{one(v)})" for v in degrade)
             + f", and OAPPO's gated reuse, read strictly as ending above no reuse seed by seed, is {head.status} (IQM of "
-            f"{head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)}{one(head)})")
+            f"{head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)}{one(head)}).")
     if always:
-        text += ("; in the seed-paired ablation, always-on reuse across the two legs against no reuse is "
-                 + " and ".join(f"{v.status} {'on speed' if v.claim.test == 'faster' else 'on the final return'} "
-                                f"({'P(faster) ' if v.claim.test == 'faster' else ''}{words.short(v.estimates[0].interval)}"
-                                f" over {v.estimates[0].seeds} paired seeds{one(v)})"
-                                for v in always.values())
-                 + ("" if always.get("faster") is None or always["faster"].status != Status.CONTRADICTED
-                    else ": the paper's direction, reuse slowing the legs down, but one seed's removal overturns it"
-                    if always["faster"].robustness.one_seed else ", so reuse slowed the legs down, as the paper's claim "
-                    "has it"))
+        level = get_figure("fig_selection_mamujoco").metric
+        moved = {"paired_higher": ("ended {} no reuse on the final return", "above", "below"),
+                 "faster": (f"reached {level.reach.format(level.threshold)} {{}} no reuse", "sooner than", "later than")}
+        text += (" In the seed-paired ablation on the stronger, normalised learner, always-on reuse across the two legs "
+                 + " and ".join(moved[v.claim.test][0].format(direction(v, *moved[v.claim.test][1:]))
+                                + f" ({'P(faster) ' if v.claim.test == 'faster' else ''}"
+                                f"{words.short(v.estimates[0].interval)} over {v.estimates[0].seeds} paired seeds{one(v)}"
+                                + ("" if v.status in DECIDED else "; by its point estimate only") + ")"
+                                for v in always.values()))
+        slower = always.get("faster")
+        if slower is not None and slower.status == Status.CONTRADICTED:
+            text += ": " + app_a_reading(slower)
+        text += "."
     if switch is not None and switch.status == Status.NO_SELECTION:
         gated = switch.estimates[1]
-        text += (f", and with one peer the gate is a switch that shut for good by {switch.reuse[0].last_open / 1e3:,.0f}k "
+        text += (f" With one peer the gate is a switch: it shut for good by {switch.reuse[0].last_open / 1e3:,.0f}k "
                  f"steps on every seed, beating always-on reuse ({gated.interval.point:+.0f}, {gated.higher_on} of "
-                 f"{gated.seeds} seeds) only by turning reuse off")
+                 f"{gated.seeds} seeds) only by turning reuse off.")
     d = dose(judged, "fig_dose_mamujoco")
     if d["testable"]:
-        text += ("; where each leg's gate has three peers to choose between, a gate ended above both no reuse and "
-                 "always-on reuse " + dose_clause(d, "Ant 4x2"))
-    return text + "."
+        ends = always_vs_never("fig_dose_mamujoco")
+        text += (" Where each leg's gate has three peers to choose between, a gate ended above both no reuse and "
+                 "always-on reuse " + dose_clause(d, "Ant 4x2")
+                 + (f", and always-on reuse ended {ends}" if ends else "") + ".")
+    return text
+
+
+def app_a_reading(v: Verdict) -> str:
+    """A claim that always-on reuse beats no reuse, read against App. A's claim (reuse degrades):
+    where it went App. A's way, how firmly (wholly, or by the point estimate only; the seeds whose
+    removal would move the interval); empty where it did not go that way."""
+    if v.status not in (Status.NOT, Status.CONTRADICTED):
+        return ""
+    how = "reuse slowing the legs down" if v.claim.test == "faster" else "reuse lowering the return"
+    if v.status == Status.NOT:
+        return f"App. A's direction, {how}, by the point estimate only"
+    line = 0.5 if v.estimates[0].kind == "improvement" else 0
+    return (f"what App. A's claim predicts, {how}"
+            + (f", though without any one of {len(v.robustness.flips)} seed{'s' * (len(v.robustness.flips) > 1)} the "
+               f"interval reaches {line:g}" if v.robustness.one_seed else ""))
+
+
+def direction(v: Verdict, more: str, less: str) -> str:
+    """Which way a verdict's curve moved against the other, by the side its point estimate is on:
+    ``more`` (the claim's side) or ``less``; whether its interval is wholly there is the status's."""
+    return more if v.status in (Status.REPRODUCED, Status.WITHIN_NOISE) else less
+
+
+def always_vs_never(figure: str) -> str:
+    """Always-on reuse against no reuse in a dose-response's runs: which side of no reuse it
+    ended on (where the interval says), the IQM of the paired differences and the seeds."""
+    fig = get_figure(figure)
+    df = experiments.read_figure(figure, "cpu", skip_missing=True)[0]
+    if df.empty or not {"oappo always", "happo"} <= set(df["label"]):
+        return ""
+    ev = Evidence(df, fig.metric)
+    d, pairs = ev.paired("oappo always", "happo"), ev.pairs("oappo always", "happo")
+    side = "below" if d.high < 0 else "above" if d.low > 0 else "within noise of"
+    return (f"{side} no reuse there ({words.short(d)}, higher on {int((pairs['difference'] > 0).sum())} of "
+            f"{len(pairs)} paired seeds)")
 
 
 # what a figure's envs are, in the paper's words (a sentence names them with these)
@@ -275,16 +329,17 @@ def unrun_sentence(judged) -> str:
     by = {}
     for j in never:
         by.setdefault(j.figure.id, []).append(env_name(j.lead))
-    parts = [f"Section {fig.section}'s {KINDS.get(fig.id, 'envs')} {', '.join(dict.fromkeys(envs))} (notebook "
-             f"{fig.notebook[:2]})" for fig, envs in ((get_figure(f), envs) for f, envs in by.items())]
-    priced = [costs.plan("paper", figures=(f,), from_nothing=True, envs={j.lead.claim.env for j in never})[0][0]
-              for f in by]
-    hours, unpriced = sum(p.cpu_hours for p in priced), sum(p.unpriced for p in priced)
-    runs = sum(p.runs for p in priced)
-    return (f"Never run: {'; '.join(parts)}: their `paper` budgets need "
-            + (f"at least {hours:,.0f} CPU hours for the {runs - unpriced} of {runs} runs that have a measured price"
-               if unpriced else f"about {hours:,.0f} CPU hours")
-            + ", a cluster's job" + untested_clause(judged) + ". The table below says claim by claim what held.")
+    parts = []
+    for f, envs in by.items():
+        fig = get_figure(f)
+        price = costs.plan("paper", figures=(f,), from_nothing=True, envs={j.lead.claim.env for j in never})[0][0]
+        priced = price.runs - price.unpriced
+        parts.append(f"Section {fig.section}'s {KINDS.get(f, 'envs')} {', '.join(dict.fromkeys(envs))} (notebook "
+                     f"{fig.notebook[:2]}; " + (f"at least {price.cpu_hours:,.0f} CPU hours for the {priced} of "
+                                                f"{price.runs} runs with a measured price" if price.unpriced else
+                                                f"about {price.cpu_hours:,.0f} CPU hours for its {price.runs} runs") + ")")
+    return (f"Never run, and priced at their `paper` budgets: {'; '.join(parts)}" + untested_clause(judged)
+            + ". The table below says claim by claim what held.")
 
 
 def untested_clause(judged) -> str:
@@ -313,6 +368,7 @@ def headlines(judged: list[verdicts.Judged] | None = None) -> str:
     judged = verdicts.glance() if judged is None else judged
     return "\n".join(f"- {v.claim.text} (Section {j.figure.section}): **{v.status}**"
                      + (f", {words.lead_estimate(v)}" if v.estimates else f" ({words.reason(v)})")
+                     + (f" ({v.metric.final})" if v.estimates and v.estimates[0].kind == "level" else "")
                      + (f"; {words.robustness(v)}" if v.one_seed else "")
                      for j, v in headline_verdicts(judged))
 
@@ -325,8 +381,22 @@ def draw_sentence() -> str:
         return ""
     parts = [f"{row['env'].partition(':')[2]} {row['sampled minus weights']:+.3g} [{row['low']:.3g}, {row['high']:.3g}] "
              f"(sampled higher on {row['sampled higher']} of {row['pairs']} seeds)" for _, row in always.iterrows()]
+    why = draw_why()
     return ("With the gate always open, Algorithm 1's draw (one source per learner and iteration) against Eq. 8's "
-            "weights, final value sampled minus weights, IQM of paired seeds: " + "; ".join(parts) + ".")
+            "weights, final value sampled minus weights, IQM of paired seeds: " + "; ".join(parts) + "."
+            + (f" Why the draw failed on 2s3z: {why}." if why else ""))
+
+
+def draw_why() -> str:
+    """Why Algorithm 1's draw failed on 2s3z (``selection.draw_probe``), as a clause; empty
+    where the probe's files are not on disk."""
+    p = selection.draw_probe()
+    if p is None:
+        return ""
+    return (f"in seed 10's probe the updates that drew a peer were {p['peer']:.0%} of all and carried {p['carried']:.0%} "
+            "of the acting policies' move, since nothing in such a learner's loss holds its own seat; with its own seat "
+            f"kept beside the drawn peer the run's last 11 evaluations won {p['anchored']:.2f} against the draw's "
+            f"{p['sampled']:.2f}")
 
 
 def cost_sentence() -> str:

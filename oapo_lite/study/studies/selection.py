@@ -172,3 +172,21 @@ def estimators(df: pd.DataFrame, figure: str) -> pd.DataFrame:
                          "CPU-s happo": cost.get("happo", np.nan), "CPU-s weights": cost[weighted],
                          "CPU-s sampled": cost[sampled]})
     return pd.DataFrame(rows)
+
+
+def draw_probe() -> dict | None:
+    """Why Algorithm 1's draw failed on 2s3z, from seed 10's probed runs
+    (``benchmarks/draw_collapse.py``, kept in ``figures/data/draw_collapse/``): in the drawn run,
+    the share of learner updates that drew a peer (``peer``) and their share of the distance the
+    acting policies moved (``carried``: own-seat KL after the update); the win rate of the last
+    11 evaluations of the drawn run (``sampled``) and of its control that keeps the learner's own
+    seat beside the drawn peer (``anchored``). None where the probe's files are not on disk."""
+    folder = experiments.data_dir("cpu") / "draw_collapse"
+    paths = {key: folder / f"{key}_{kind}.csv" for key in ("sampled", "anchored") for kind in ("updates", "rows")}
+    if not all(p.exists() for p in paths.values()):
+        return None
+    up = pd.read_csv(folder / "sampled_updates.csv")
+    last = {key: float(pd.read_csv(folder / f"{key}_rows.csv")["eval_success"].iloc[-11:].mean())
+            for key in ("sampled", "anchored")}
+    return {"peer": float(up["peer"].mean()), "carried": float(up.loc[up["peer"], "own_kl"].sum() / up["own_kl"].sum()),
+            **last}
