@@ -84,6 +84,23 @@ def test_every_status_has_its_own_colour_in_the_count_figure_and_the_bars_add_up
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["reproduced", "not run"]
 
 
+def test_a_dose_response_draws_each_curve_in_its_colour_and_the_open_share_as_bars():
+    import matplotlib.colors as mcolors
+    import numpy as np
+
+    labels = ["happo", "oappo sigma=0.035", "oappo always"]
+    dose = pd.DataFrame({"label": labels, "sigma": [0.0, 0.035, np.inf], "open": [np.nan, 0.25, 1.0],
+                         "final": [0.9, 0.95, 0.96], "final_low": [0.8, 0.9, 0.94], "final_high": [0.95, 0.97, 0.97],
+                         "steps": [5e5, 4e5, 4.2e5], "steps_low": [4e5, 3e5, 4e5], "steps_high": [6e5, 5e5, 5e5]})
+    fig = plotting.dose_response(dose, "2s3z", "final win rate", "env steps to 80%")
+    final, steps, share = fig.axes
+    points = final.collections[-1]
+    assert [mcolors.to_hex(c) for c in points.get_facecolors()] == [palette.color(label) for label in labels]
+    assert np.allclose(points.get_offsets()[:, 1], dose["final"])
+    assert [b.get_height() for b in share.patches] == [0.0, 0.25, 1.0]  # no reuse: a gate never open
+    assert [t.get_text() for t in share.get_xticklabels()] == ["never", "0.035", "always"]
+
+
 def test_no_notebook_picks_a_colour_of_its_own():
     """Inline plots take every curve's colour from the palette: no colour map or colour cycle of
     matplotlib's, no literal colour."""

@@ -159,6 +159,28 @@ def gate_strips(kl: pd.DataFrame, owner: list[int], sigma: float, names, ax=None
     return ax
 
 
+def dose_response(dose: pd.DataFrame, where: str, final: str, speed: str):
+    """A dose-response over sigma (``selection.dose``'s table), from no reuse (sigma 0) to always-on
+    (inf): the final value and the steps to the level as IQMs with 95% intervals, each curve's
+    point in its colour over a grey bar, and how often each gate let another network in."""
+    fig, axes = plt.subplots(1, 3, figsize=(17, 4.2))
+    x = np.arange(len(dose))
+    ticks = ["never" if s == 0 else "always" if np.isinf(s) else f"{s:g}" for s in dose["sigma"]]
+    for ax, (col, name) in zip(axes, (("final", final), ("steps", speed))):
+        ax.errorbar(x, dose[col], yerr=[dose[col] - dose[f"{col}_low"], dose[f"{col}_high"] - dose[col]],
+                    fmt="none", ecolor="0.3", capsize=3, zorder=1)
+        ax.scatter(x, dose[col], s=70, color=[palette.color(label) for label in dose["label"]], zorder=2)
+        ax.set_xticks(x, ticks)
+        ax.set(xlabel="sigma (the gate's threshold on K)", ylabel=name, title=f"{where}\n{name}, IQM [95% CI]")
+    axes[1].yaxis.set_major_formatter(STEPS)
+    axes[2].bar(x, dose["open"].fillna(0.0), color=[palette.color(label) for label in dose["label"]])
+    axes[2].set_xticks(x, ticks)
+    axes[2].set(xlabel="sigma", ylabel="gate-open share", ylim=(0, 1),
+                title=f"{where}\nhow often the gate let another network in")
+    fig.tight_layout()
+    return fig
+
+
 def verdict_counts(counts: pd.DataFrame, ax=None, title=None):
     """``claims.summary``'s counts as one stacked bar per section, a colour per status
     (``palette.STATUS``), with a key below the bars."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from oapo_lite.study.catalogue.tests import FINAL_TIE
-from oapo_lite.study.judge.evidence import LEARNED, REUSE_PART, NotLearned, Reuse
+from oapo_lite.study.judge.evidence import REUSE_PART, NotLearned, Reuse
 from oapo_lite.study.judge.records import DECIDED, MECHANISM, Estimate, Gap, Level, Status, Verdict
 
 STAT_WORDS = {"steps": "faster", "final": "higher", "drawdown": "steadier", "reached": "reached"}
@@ -95,7 +95,7 @@ def reuse(r: Reuse) -> str:
     last = ("no seed ever gave another network's seats weight" if np.isnan(r.last_open)
             else f"the gate last opened across networks at {r.last_open:,.0f} steps")
     return (f"{last}; {r.curve} reused across networks at {r.while_learning:.1%} of its evaluated iterations while "
-            f"it learned (up to {LEARNED:.0%} of its gain; {r.overall:.1%} of all of them), mean over {r.seeds} "
+            f"it learned ({r.overall:.1%} of all of them), mean over {r.seeds} "
             f"seed{'s' * (r.seeds != 1)}")
 
 
@@ -142,11 +142,17 @@ def robustness(v: Verdict) -> str:
     if not v.one_seed:
         return ""
     flips = v.robustness.flips
-    seeds = ", ".join(str(s) for s, _ in flips[:-1]) + (" or " if len(flips) > 1 else "") + str(flips[-1][0])
-    after = " or ".join(sorted({str(st) for _, st in flips}))
-    if len(flips) == 1:
-        return f"rests on one seed: without seed {seeds} the interval reads {after}"
-    return f"rests on one seed: without any one of seeds {seeds} the interval reads {after}"
+    by: dict[str, list] = {}  # the status each seed's removal gives, and the seeds that give it
+    for seed, status in flips:
+        by.setdefault(str(status), []).append(str(seed))
+
+    def without(seeds: list) -> str:
+        if len(seeds) == 1:
+            return f"without seed {seeds[0]}"
+        return f"without any one of seeds {', '.join(seeds[:-1])} or {seeds[-1]}"
+
+    return "rests on one seed: " + "; ".join(f"{without(seeds)} the interval reads {status}"
+                                             for status, seeds in by.items())
 
 
 def reason(v: Verdict) -> str:
