@@ -192,7 +192,10 @@ def on_seeds(v: Verdict) -> str:
     seeds, final values and whether one seed carries it; then how much the curve reused across
     networks, and whether its gate ever shut."""
     env = env_name(v)
-    text = (f"On {env}{',' if env in figures.smax.PAPER_MAPS else ', a map the paper did not run,'} {reading(v.claim.curves[0])} "
+    fig = get_figure(v.figure)
+    share = fig.budget("cpu", v.claim.env).steps / fig.budget("paper", v.claim.env).steps
+    text = (f"On {env} (at {100 * share:.3g}% of HARL's steps"
+            f"{')' if env in figures.smax.PAPER_MAPS else '; a map the paper did not run)'}, {reading(v.claim.curves[0])} "
             f"was {v.status} on {len(v.robustness.seeds)} seeds ({_finals(v)}"
             + (", resting on one seed" if v.robustness.one_seed else "") + ").")
     if v.reuse:
