@@ -71,9 +71,11 @@ def ceiling(figure: str, env: str | None = None) -> tuple[float, float] | None:
 def ablation_table(judged: list[verdicts.Judged]) -> pd.DataFrame:
     """The seed-paired ablation and the dose-response, one row per claim: env, the comparison,
     the verdict, each estimate its interval read against its curve (``words.short``; a selection
-    claim reads two, one per end, and both must hold), and whether one seed carries it."""
+    claim reads two, one per end, and both must hold), its budget as a share of HARL's steps, its
+    seeds of those planned, and whether one seed carries it."""
     rows = []
     for figure in ABLATION + DOSE:
+        planned = len(get_figure(figure).budget("cpu").seeds)
         for v in _figure(judged, figure):
             read = v.estimates[:2] if v.claim.kind.statistic == "selection" else v.estimates[:1]
             rows.append({"env": env_name(v), "claim": v.claim.text, "verdict": v.status.value,
@@ -81,8 +83,9 @@ def ablation_table(judged: list[verdicts.Judged]) -> pd.DataFrame:
                              f"vs {e.curves[1]}: {words.short(e.interval)}"
                              + ("" if e.higher_on is None else f", higher on {e.higher_on} of {e.seeds}")
                              for e in read) or "-",
-                         "seeds": f"{len(v.robustness.seeds)}" + ("; " + words.robustness(v) if v.one_seed else "")
-                         if v.robustness else "-"})
+                         "budget": f"{_share(figure)} of HARL's steps",
+                         "seeds": f"{len(v.robustness.seeds)}" + (f" of {planned} planned" * (len(v.robustness.seeds) < planned))
+                         + ("; " + words.robustness(v) if v.one_seed else "") if v.robustness else "-"})
     return pd.DataFrame(rows)
 
 
@@ -226,8 +229,14 @@ def homogeneous(fig4: list[Verdict]) -> str:
     vs = [v for v in fig4 if env_name(v) == HOMOGENEOUS and v.claim.curves[0] == "oappo"]
     if not vs:
         return ""
-    return (f" On {HOMOGENEOUS}, the paper's homogeneous map, the claims for {reading('oappo')} were judged: "
-            + "; ".join(f"{COMPARED[v.claim.test]} {v.claim.curves[1].upper()}, {v.status}" for v in vs)
+    fig = get_figure(vs[0].figure)
+    share = fig.budget("cpu", vs[0].claim.env).steps / fig.budget("paper", vs[0].claim.env).steps
+    seeds = next((len(v.robustness.seeds) for v in vs if v.robustness), None)
+    return (f" On {HOMOGENEOUS}, the paper's homogeneous map (at {100 * share:.3g}% of HARL's steps"
+            + (f", {seeds} seeds" if seeds else "") + f"), the claims for {reading('oappo')} were judged: "
+            + "; ".join(f"{COMPARED[v.claim.test]} {v.claim.curves[1].upper()}, {v.status}"
+                        + (f" ({words.estimate(v.estimates[0])}" + (", resting on one seed" if v.one_seed else "") + ")"
+                           if v.estimates else "") for v in vs)
             + ".")
 
 
@@ -239,8 +248,10 @@ def smax_sentence(judged) -> str:
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
-            f"MAPPO on heterogeneous maps held on {len(s['held'])} of its {len(s['heads'])} maps"
-            + (f" ({unrun} not run)" if (unrun := sum(v.status == Status.NOT_RUN for v in s["heads"])) else "")
+            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['heads'])} maps we judged it on "
+            f"(the paper's {sum(env_name(v) in figures.smax.PAPER_MAPS for v in s['heads'])}"
+            + (f", {unrun} of them not run" if (unrun := sum(v.status == Status.NOT_RUN for v in s["heads"])) else "")
+            + ", and 2s3z)"
             + f"; the 95% interval decided it on {len(s['decided'])}, {len(s['contradicted'])} of them against the claim. "
             + " ".join(on_seeds(v) + other_readings(judged, v) for v in s["heads"] if v.levels)
             + homogeneous(_figure(judged, "fig4_smax"))
@@ -283,7 +294,10 @@ def mujoco_sentence(judged) -> str:
             + " and ".join(f"{v.status} for {v.claim.curves[1].upper()} on {len(v.robustness.seeds)} seeds "
                            f"({'; '.join(words.estimate(e) for e in v.estimates)}{one(v)})" for v in degrade)
             + f", and OAPPO's gated reuse, read strictly as ending above no reuse seed by seed, is {head.status} (IQM of "
-            f"{head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)}{one(head)}).")
+            f"{head.estimates[0].seeds} paired differences {words.short(head.estimates[0].interval)}{one(head)})"
+            + (f"; its gate (sigma {sigma_of(head):g}) gave the other leg weight at {r.overall:.0%} of its evaluations, so "
+               "this compares reuse that was on most of the time with none" if (r := head.reuse_of("oappo")) is not None
+               and r.overall > 0.5 else "") + ".")
     if always:
         level = get_figure("fig_selection_mamujoco").metric
         moved = {"paired_higher": ("ended {} no reuse on the final return", "above", "below"),
@@ -310,6 +324,11 @@ def mujoco_sentence(judged) -> str:
                  "always-on reuse " + dose_clause(d, f"Ant 4x2 (at {_share('fig_dose_mamujoco')} of HARL's steps)")
                  + (f", and always-on reuse ended {ends}" if ends else "") + ".")
     return text
+
+
+def sigma_of(v: Verdict) -> float:
+    """The sigma of the first curve of ``v``'s claim, from its figure's config."""
+    return float(dict(figures.figure_runs(v.figure, "cpu"))[v.claim.curves[0]].sigma)
 
 
 def app_a_reading(v: Verdict) -> str:
@@ -398,10 +417,20 @@ def headlines(judged: list[verdicts.Judged] | None = None) -> str:
     the lead one is the 20-seed budget's and differs."""
     judged = verdicts.glance() if judged is None else judged
     lines = []
-    for j, v in headline_verdicts(judged):
+    for j in judged:
+        v = j.lead
+        own = j.figure.id == "figA_mamujoco" and v.claim.curves[0] == "happo"  # App. A's words: direct reuse degrades
+        homogeneous_map = (j.figure.id == "fig4_smax" and env_name(v) == HOMOGENEOUS and v.claim.test == "higher"
+                           and v.claim.curves == ("oappo", "mappo"))  # "superior outcomes compared to MAPPO"
+        if not (v.claim.headline or own or homogeneous_map):
+            continue
         where = f"Section {j.figure.section}"
-        if j.figure.id == "figA_mamujoco":
+        if own:
+            where += "; App. A's own claim"
+        elif j.figure.id == "figA_mamujoco":
             where += f"; our strict reading for OAPPO, where App. A's own claim is that {APP_A}"
+        elif homogeneous_map:
+            where += "; the paper's homogeneous map"
         elif j.figure.id == "fig4_smax" and env_name(v) not in figures.smax.PAPER_MAPS:
             where += "; a map the paper did not run"
         if v.status != Status.NOT_RUN:
@@ -458,8 +487,8 @@ def cost_sentence() -> str:
             paid = [label for label, r in rows if r["side_by_side"] and r["cpu_s"] < part.loc["happo", "cpu_s"]]
             parts.append(f"{env.partition(':')[2]} (to {level.reach.format(level.threshold)}): HAPPO "
                          f"{part.loc['happo', 'cpu_s']:.0f}, " + ", ".join(said) + " CPU seconds; reuse "
-                         + (f"reached it on less compute than HAPPO with {', '.join(paid)}" if paid
-                            else "reached it on no less compute than HAPPO")
+                         + (f"reached it on fewer CPU seconds than HAPPO, by the median alone, with {', '.join(paid)}"
+                            if paid else "reached it on no fewer CPU seconds than HAPPO")
                          + (f" ({', '.join(apart)}: measured at other revisions than HAPPO, left out)" if apart else ""))
     return ("What reuse costs, from the runs' own records (the median over seeds of the CPU seconds spent when a "
             "curve's IQM first reached the level; without an interval, a reading rather than a verdict): "

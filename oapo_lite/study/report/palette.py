@@ -50,6 +50,9 @@ REUSED, OMITTED = "#e6a100", "#9a9a9a"
 STATUS = {"reproduced": "#1b7837", "within noise": "#a6dba0", "not reproduced": "#c2a5cf", "contradicted": "#762a83",
           "not a test of reuse": "#636363", "a test of sharing": "#969696", "not a test of selection": "#bdbdbd",
           "not testable at this budget": "#d9d9d9", "not run": "#f0f0f0"}
+# the greys apart by hatching too: five light shades are hard to tell apart in print
+STATUS_HATCH = {"not a test of reuse": "//", "a test of sharing": "\\\\", "not a test of selection": "xx",
+                "not testable at this budget": "..", "not run": ""}
 # other names of a curve in the table (the same runs drawn in another figure)
 ALIASES = {"oappo lambda=0.4": "lambda = 0.4", "oappo lambda=1": "lambda = 1", "oappo lambda=0.2": "lambda = 0.2",
            "happo two legs": "happo", "oappo sigma=0.046": "oappo gated"}

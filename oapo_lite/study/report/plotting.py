@@ -189,7 +189,7 @@ def verdict_counts(counts: pd.DataFrame, ax=None, title=None):
     left = np.zeros(len(counts))
     for status in statuses:
         ax.barh(counts.index.astype(str), counts[status], left=left, color=palette.STATUS[status], label=status,
-                edgecolor="white", linewidth=0.5)
+                edgecolor="0.35", linewidth=0.5, hatch=palette.STATUS_HATCH.get(status, ""))
         left += counts[status].to_numpy()
     ax.invert_yaxis()  # the paper's order, top to bottom
     ax.set(xlabel="claims", title=title or "the claims' verdicts per section")
