@@ -83,10 +83,16 @@ def ablation_table(judged: list[verdicts.Judged]) -> pd.DataFrame:
                              f"vs {e.curves[1]}: {words.short(e.interval)}"
                              + ("" if e.higher_on is None else f", higher on {e.higher_on} of {e.seeds}")
                              for e in read) or "-",
-                         "budget": f"{_share(figure)} of HARL's steps",
+                         "budget": claims.budget_share(figure, v.claim.env or _env_of(figure), "cpu"),
                          "seeds": f"{len(v.robustness.seeds)}" + (f" of {planned} planned" * (len(v.robustness.seeds) < planned))
                          + ("; " + words.robustness(v) if v.one_seed else "") if v.robustness else "-"})
     return pd.DataFrame(rows)
+
+
+def _env_of(figure: str) -> str:
+    """The env of a figure judged whole (its common env, else its curves')."""
+    fig = get_figure(figure)
+    return fig.common.get("env") or next(kw["env"] for _, kw in fig.curves if "env" in kw)
 
 
 def env_name(v: Verdict) -> str:
@@ -138,7 +144,7 @@ def maze_sentence(judged) -> str:
     return (f"On the mazes (Section 6.1; {claims.budget_share(j.figure.id, None, j.budget, j.seeds_on_disk)}), the "
             f"paper's claim that OAPPO converges faster than HAPPO is {faster.status} "
             f"on {len(faster.robustness.seeds)} seeds (P(faster) {words.short(faster.estimates[0].interval)}). Reuse "
-            f"helped the agents reach the optimum: on {m['n']} generated layouts OAPPO (lambda = 0.7) ended below 95% of "
+            f"helped the agents reach the optimum: on {m['n']} generated layouts (notebook 16) OAPPO (lambda = 0.7) ended below 95% of "
             f"the optimum on {b('oappo')} runs against HAPPO's {b('happo')}, since a moderate share of the peer's "
             f"experience carried the runs HAPPO lost to exploration. Leaning on the peer trapped them ({lean}); on "
             f"Black-Red, lambda = 0.4 ended at {level.interval.point:.3f} of the optimum (IQM over {level.seeds} seeds, "
@@ -242,17 +248,18 @@ def homogeneous(fig4: list[Verdict]) -> str:
 
 def smax_sentence(judged) -> str:
     s = _smax(judged)
+    ran = [v for v in s["heads"] if v.status != Status.NOT_RUN]
+    unrun = [v for v in s["heads"] if v.status == Status.NOT_RUN]
     ablation = _figure(judged, "fig_selection_smax")
     ends = {env_name(v): v for v in ablation if v.claim.test == "selects"}
     reuse = [v for v in ablation if v.claim.test == "paired_higher" and v.claim.curves[0] == "oappo always" and v.held]
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
     d = dose(judged, "fig_dose_smax")
     text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
-            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(s['heads'])} maps we judged it on "
-            f"(the paper's {sum(env_name(v) in figures.smax.PAPER_MAPS for v in s['heads'])}"
-            + (f", {unrun} of them not run" if (unrun := sum(v.status == Status.NOT_RUN for v in s["heads"])) else "")
-            + ", and 2s3z)"
-            + f"; the 95% interval decided it on {len(s['decided'])}, {len(s['contradicted'])} of them against the claim. "
+            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(ran)} maps with runs "
+            f"({', '.join(env_name(v) for v in ran)}); the 95% interval decided it on {len(s['decided'])}, "
+            f"{len(s['contradicted'])} of them against the claim"
+            + (f"; {', '.join(env_name(v) for v in unrun)} was not run" if unrun else "") + ". "
             + " ".join(on_seeds(v) + other_readings(judged, v) for v in s["heads"] if v.levels)
             + homogeneous(_figure(judged, "fig4_smax"))
             + " Plain parameter sharing was strong: MAPPO's final IQM was at or above HAPPO's on every map. "
@@ -464,7 +471,7 @@ def draw_why() -> str:
     p = selection.draw_probe()
     if p is None:
         return ""
-    return (f"in seed 10's probe the updates that drew a peer were {p['peer']:.0%} of all and carried {p['carried']:.0%} "
+    return (f"in seed 10's probe (notebook 20) the updates that drew a peer were {p['peer']:.0%} of all and carried {p['carried']:.0%} "
             "of the acting policies' move, since nothing in such a learner's loss holds its own seat; with its own seat "
             f"kept beside the drawn peer the run's last 11 evaluations won {p['anchored']:.2f} against the draw's "
             f"{p['sampled']:.2f}")
@@ -490,7 +497,7 @@ def cost_sentence() -> str:
                          + (f"reached it on fewer CPU seconds than HAPPO, by the median alone, with {', '.join(paid)}"
                             if paid else "reached it on no fewer CPU seconds than HAPPO")
                          + (f" ({', '.join(apart)}: measured at other revisions than HAPPO, left out)" if apart else ""))
-    return ("What reuse costs, from the runs' own records (the median over seeds of the CPU seconds spent when a "
+    return ("What reuse costs, from the runs' own records (notebooks 20 and 21; the median over seeds of the CPU seconds spent when a "
             "curve's IQM first reached the level; without an interval, a reading rather than a verdict): "
             + "; ".join(parts) + ".") if parts else ""
 
