@@ -147,7 +147,7 @@ def maze_sentence(judged) -> str:
             f"helped the agents reach the optimum: on {m['n']} generated layouts (notebook 16) OAPPO (lambda = 0.7) ended below 95% of "
             f"the optimum on {b('oappo')} runs against HAPPO's {b('happo')}, since a moderate share of the peer's "
             f"experience carried the runs HAPPO lost to exploration. Leaning on the peer trapped them ({lean}); on "
-            f"Black-Red, lambda = 0.4 ended at {level.interval.point:.3f} of the optimum (IQM over {level.seeds} seeds, "
+            f"Black-Red (notebook 12), lambda = 0.4 ended at {level.interval.point:.3f} of the optimum (IQM over {level.seeds} seeds, "
             f"{level.reached} of which reached 95%), so the paper's \"lambda = 0.4 strikes a balance\" is "
             f"{balance.status} here: below lambda = 1/2 a learner's update weighs its peer's experience above its own.")
 
@@ -255,9 +255,11 @@ def smax_sentence(judged) -> str:
     reuse = [v for v in ablation if v.claim.test == "paired_higher" and v.claim.curves[0] == "oappo always" and v.held]
     top = ceiling("fig_selection_smax", "smax:6h_vs_8z")
     d = dose(judged, "fig_dose_smax")
-    text = (f"On SMAX (Section 6.2, at {_share('fig4_smax')} of HARL's steps), the paper's claim that OAPPO ends above "
-            f"MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(ran)} maps with runs "
-            f"({', '.join(env_name(v) for v in ran)}); the 95% interval decided it on {len(s['decided'])}, "
+    named = "; ".join(env_name(v) + ("" if env_name(v) in figures.smax.PAPER_MAPS else ", not a map of the paper")
+                      for v in ran)
+    text = (f"On SMAX (Section 6.2, notebook 20, at {_share('fig4_smax')} of HARL's steps), the paper's claim that "
+            f"OAPPO ends above MAPPO on heterogeneous maps held on {len(s['held'])} of the {len(ran)} maps with runs "
+            f"({named}); the 95% interval decided it on {len(s['decided'])}, "
             f"{len(s['contradicted'])} of them against the claim"
             + (f"; {', '.join(env_name(v) for v in unrun)} was not run" if unrun else "") + ". "
             + " ".join(on_seeds(v) + other_readings(judged, v) for v in s["heads"] if v.levels)
@@ -296,8 +298,8 @@ def mujoco_sentence(judged) -> str:
     degrade = [v for v in _figure(judged, "figA_mamujoco") if v.claim.curves[0] == "happo"]
     always = {v.claim.test: v for v in _figure(judged, "fig_selection_mamujoco") if v.claim.curves == ("oappo always", "happo")}
     one = lambda v: ", resting on one seed" if v.robustness.one_seed else ""  # noqa: E731
-    text = (f"On multi-agent MuJoCo (App. A, HalfCheetah 2x3, at {_share('figA_mamujoco')} of HARL's steps), the paper's "
-            f"claim that {APP_A} is "
+    text = (f"On multi-agent MuJoCo (App. A, notebook 21, HalfCheetah 2x3, at {_share('figA_mamujoco')} of HARL's "
+            f"steps), the paper's claim that {APP_A} is "
             + " and ".join(f"{v.status} for {v.claim.curves[1].upper()} on {len(v.robustness.seeds)} seeds "
                            f"({'; '.join(words.estimate(e) for e in v.estimates)}{one(v)})" for v in degrade)
             + f", and OAPPO's gated reuse, read strictly as ending above no reuse seed by seed, is {head.status} (IQM of "
@@ -413,9 +415,10 @@ def untested_clause(judged) -> str:
 
 
 def opening(judged: list[verdicts.Judged] | None = None) -> str:
-    """The README's opening: one paragraph per engine family and one on what was never run."""
+    """The README's opening: the theory, one paragraph per engine family and one on what was never run."""
     judged = verdicts.glance() if judged is None else judged
-    return "\n\n".join([maze_sentence(judged), smax_sentence(judged), mujoco_sentence(judged), unrun_sentence(judged)])
+    return "\n\n".join([THEORY, maze_sentence(judged), smax_sentence(judged), mujoco_sentence(judged),
+                        unrun_sentence(judged)])
 
 
 def headlines(judged: list[verdicts.Judged] | None = None) -> str:
@@ -460,8 +463,10 @@ def draw_sentence() -> str:
     parts = [f"{row['env'].partition(':')[2]} {row['sampled minus weights']:+.3g} [{row['low']:.3g}, {row['high']:.3g}] "
              f"(sampled higher on {row['sampled higher']} of {row['pairs']} seeds)" for _, row in always.iterrows()]
     why = draw_why()
-    return ("With the gate always open, Algorithm 1's draw (one source per learner and iteration) against Eq. 8's "
-            "weights, final value sampled minus weights, IQM of paired seeds: " + "; ".join(parts) + "."
+    return ("Every curve above weighs its sources by M, as Eq. 8 does. In the seed-paired ablations (notebooks 20 "
+            "and 21, at the ablations' budgets), with the gate always open, Algorithm 1's draw (one source per learner "
+            "and iteration) against Eq. 8's weights, final value sampled minus weights, IQM of paired seeds: "
+            + "; ".join(parts) + "."
             + (f" Why the draw failed on 2s3z: {why}." if why else ""))
 
 
